@@ -1,0 +1,139 @@
+"""The per-hand metadata file (`hand.json`): every hand-specific fact code needs.
+
+Code never branches on a hand's name; it reads these fields. A user's hand is a URDF plus
+this file, and a missing field is reported by name.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from models.errors import HandError
+
+REQUIRED_FIELDS = (
+    "name",
+    "urdf",
+    "joint_order",
+    "fingertips",
+    "anchor_fingers",
+    "open_pose",
+    "closing_direction",
+    "palm",
+    "actuator",
+    "ignore_collision_pairs",
+)
+PALM_FIELDS = ("center", "normal", "finger_axis")
+
+
+@dataclass(frozen=True)
+class Fingertip:
+    """A fingertip: the sphere centre at the tip of `link` (link frame) and its radius."""
+
+    name: str
+    link: str
+    point: np.ndarray
+    radius: float
+
+
+@dataclass(frozen=True)
+class Palm:
+    """Palm frame in the root link: centre on the palm surface, outward normal (the approach
+    direction is -normal: the hand moves along its normal's opposite onto the object), and
+    the direction the straight fingers point."""
+
+    center: np.ndarray
+    normal: np.ndarray
+    finger_axis: np.ndarray
+
+
+@dataclass(frozen=True)
+class HandMeta:
+    name: str
+    urdf: str
+    joint_order: tuple[str, ...]
+    fingertips: tuple[Fingertip, ...]
+    anchor_fingers: tuple[str, ...]  # K = 4 fingertip names, thumb first
+    open_pose: dict[str, float]
+    closing_direction: dict[str, int]  # +1 / -1: increasing q closes; 0: spreads (abduction)
+    palm: Palm
+    kp: float
+    kv: float
+    force_range: float
+    ignore_collision_pairs: tuple[tuple[str, str], ...]
+    source: str  # where the kinematics come from (for provenance and vendor checks)
+
+    def fingertip(self, name: str) -> Fingertip:
+        for tip in self.fingertips:
+            if tip.name == name:
+                return tip
+        raise HandError(f"hand {self.name} has no fingertip {name!r}")
+
+
+def _vec(value, field: str, path: Path) -> np.ndarray:
+    arr = np.asarray(value, dtype=float)
+    if arr.shape != (3,) or not np.all(np.isfinite(arr)):
+        raise HandError(f"{path}: {field} must be 3 finite numbers, got {value!r}")
+    return arr
+
+
+def read_meta(path: Path) -> HandMeta:
+    """Read and check `hand.json`; raises HandError naming every missing field."""
+    try:
+        raw = json.loads(path.read_text())
+    except FileNotFoundError as err:
+        raise HandError(
+            f"hand metadata {path} not found: a hand folder needs hand.urdf and hand.json "
+            f"with fields {', '.join(REQUIRED_FIELDS)}"
+        ) from err
+    except json.JSONDecodeError as err:
+        raise HandError(f"hand metadata {path} is not valid JSON: {err}") from err
+    missing = [f for f in REQUIRED_FIELDS if f not in raw]
+    missing += [f"palm.{f}" for f in PALM_FIELDS if f not in raw.get("palm", {})]
+    if "actuator" in raw and "kp" not in raw["actuator"]:
+        missing.append("actuator.kp")
+    if missing:
+        raise HandError(f"hand metadata {path} is missing fields: {', '.join(missing)}")
+    tips = tuple(
+        Fingertip(
+            t["name"], t["link"], _vec(t["point"], f"fingertip {t['name']}", path), t["radius"]
+        )
+        for t in raw["fingertips"]
+    )
+    names = {t.name for t in tips}
+    unknown = [f for f in raw["anchor_fingers"] if f not in names]
+    if unknown or len(raw["anchor_fingers"]) != 4:
+        raise HandError(
+            f"{path}: anchor_fingers must name 4 of the fingertips {sorted(names)}; "
+            f"got {raw['anchor_fingers']}"
+        )
+    joints = tuple(raw["joint_order"])
+    for field in ("open_pose", "closing_direction"):
+        absent = [j for j in joints if j not in raw[field]]
+        if absent:
+            raise HandError(f"{path}: {field} lacks joints {absent}")
+    palm = raw["palm"]
+    act = raw["actuator"]
+    return HandMeta(
+        name=raw["name"],
+        urdf=raw["urdf"],
+        joint_order=joints,
+        fingertips=tips,
+        anchor_fingers=tuple(raw["anchor_fingers"]),
+        open_pose={j: float(raw["open_pose"][j]) for j in joints},
+        closing_direction={j: int(raw["closing_direction"][j]) for j in joints},
+        palm=Palm(
+            _vec(palm["center"], "palm.center", path),
+            _vec(palm["normal"], "palm.normal", path) / np.linalg.norm(palm["normal"]),
+            _vec(palm["finger_axis"], "palm.finger_axis", path)
+            / np.linalg.norm(palm["finger_axis"]),
+        ),
+        kp=float(act["kp"]),
+        kv=float(act.get("kv", 0.0)),
+        force_range=float(act.get("force_range", 0.0)),
+        ignore_collision_pairs=tuple(tuple(p) for p in raw["ignore_collision_pairs"]),
+        source=raw.get("source", ""),
+    )

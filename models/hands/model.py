@@ -1,0 +1,202 @@
+"""HandModel: one hand described once (URDF + hand.json), used by PyTorch, Drake and MuJoCo."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from models.errors import HandError
+from models.hands.kinematics import Kinematics, transform_points
+from models.hands.meta import HandMeta, read_meta
+from models.hands.surface import surface_points
+from models.hands.urdf import KinematicTree, read_urdf
+
+BUILTIN_DIR = Path(__file__).resolve().parent
+N_SURFACE_POINTS = 512
+
+
+def available_hands() -> list[str]:
+    """Names of the built-in hands (folders holding hand.json)."""
+    return sorted(p.parent.name for p in BUILTIN_DIR.glob("*/hand.json"))
+
+
+@dataclass
+class HandModel:
+    """A robot hand: joints, limits, batched FK, fixed surface points, simulator builders."""
+
+    folder: Path
+    meta: HandMeta
+    tree: KinematicTree
+    _kin: Kinematics = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        urdf_joints = {j.name for j in self.tree.joints.values()}
+        order = set(self.meta.joint_order)
+        if urdf_joints != order:
+            raise HandError(
+                f"{self.folder}: hand.json joint_order does not match the URDF joints: "
+                f"missing {sorted(urdf_joints - order)}, unknown {sorted(order - urdf_joints)}"
+            )
+        links = set(self.tree.links)
+        for tip in self.meta.fingertips:
+            if tip.link not in links:
+                raise HandError(
+                    f"{self.folder}: fingertip {tip.name} names unknown link {tip.link}"
+                )
+        for a, b in self.meta.ignore_collision_pairs:
+            if a not in links or b not in links:
+                raise HandError(f"{self.folder}: ignore_collision_pairs names unknown link {a}/{b}")
+        self._kin = Kinematics(self.tree, list(self.meta.joint_order))
+
+    # ---- facts --------------------------------------------------------------------------
+    @property
+    def name(self) -> str:
+        return self.meta.name
+
+    @property
+    def urdf_path(self) -> Path:
+        return self.folder / self.meta.urdf
+
+    @property
+    def joint_names(self) -> list[str]:
+        return list(self.meta.joint_order)
+
+    @property
+    def dof(self) -> int:
+        return len(self.meta.joint_order)
+
+    @property
+    def link_names(self) -> list[str]:
+        return list(self.tree.links)
+
+    @property
+    def root_link(self) -> str:
+        return self.tree.root
+
+    @cached_property
+    def lower(self) -> np.ndarray:
+        by_name = {j.name: j for j in self.tree.joints.values()}
+        return np.array([by_name[n].lower for n in self.joint_names])
+
+    @cached_property
+    def upper(self) -> np.ndarray:
+        by_name = {j.name: j for j in self.tree.joints.values()}
+        return np.array([by_name[n].upper for n in self.joint_names])
+
+    @cached_property
+    def open_pose(self) -> np.ndarray:
+        return np.array([self.meta.open_pose[n] for n in self.joint_names])
+
+    @cached_property
+    def closing_direction(self) -> np.ndarray:
+        return np.array([self.meta.closing_direction[n] for n in self.joint_names], dtype=float)
+
+    def check_joints(self, q: np.ndarray | torch.Tensor, what: str = "joint vector") -> None:
+        """Raise HandError unless q has shape (..., dof) and finite values."""
+        shape = tuple(q.shape)
+        if not shape or shape[-1] != self.dof:
+            raise HandError(
+                f"{what} for hand {self.name} has length {shape[-1] if shape else 0}; "
+                f"expected {self.dof} values in this order: {', '.join(self.joint_names)}"
+            )
+        values = q.detach().cpu().numpy() if isinstance(q, torch.Tensor) else np.asarray(q)
+        if not np.all(np.isfinite(values)):
+            raise HandError(f"{what} for hand {self.name} contains NaN or infinite values")
+
+    # ---- kinematics ---------------------------------------------------------------------
+    def link_poses(self, wrist: torch.Tensor, q: torch.Tensor) -> torch.Tensor:
+        """(B, L, 4, 4) world poses of `link_names`; wrist (B, 7) [xyz, wxyz] or (B, 4, 4)."""
+        self.check_joints(q)
+        return self._kin.link_poses(wrist, q)
+
+    def link_index(self, link: str) -> int:
+        return self.tree.links.index(link)
+
+    def fingertip_positions(
+        self, wrist: torch.Tensor, q: torch.Tensor, names: list[str] | None = None
+    ) -> torch.Tensor:
+        """(B, F, 3) world tip points (centres of the fingertip spheres), in `names` order
+        (default: every fingertip in hand.json order)."""
+        tips = [self.meta.fingertip(n) for n in names] if names else list(self.meta.fingertips)
+        idx = np.array([self.link_index(t.link) for t in tips])
+        local = torch.as_tensor(np.stack([t.point for t in tips]), dtype=q.dtype, device=q.device)
+        return transform_points(self.link_poses(wrist, q), idx, local)
+
+    @cached_property
+    def surface(self) -> tuple[np.ndarray, np.ndarray]:
+        """(link index (512,), link-frame points (512, 3)): the fixed hand surface points."""
+        eye = torch.zeros(1, 7, dtype=torch.float64)
+        eye[0, 3] = 1
+        q = torch.as_tensor(self.open_pose[None], dtype=torch.float64)
+        poses = self._kin.link_poses(eye, q)[0].numpy()
+        geoms = [self.tree.geoms[link] for link in self.tree.links]
+        return surface_points(geoms, poses, n=N_SURFACE_POINTS)
+
+    def surface_points(self, wrist: torch.Tensor, q: torch.Tensor) -> torch.Tensor:
+        """(B, 512, 3) world positions of the fixed surface points."""
+        idx, local = self.surface
+        return transform_points(
+            self.link_poses(wrist, q), idx, torch.as_tensor(local, dtype=q.dtype, device=q.device)
+        )
+
+    # ---- simulators ---------------------------------------------------------------------
+    def add_to_plant(self, plant, scene_graph=None, *, filter_self_collisions: bool = True):
+        """Add the hand (floating wrist) to a Drake MultibodyPlant; see models.hands.drake."""
+        from models.hands.drake import add_hand_to_plant
+
+        return add_hand_to_plant(self, plant, scene_graph, filter_self_collisions)
+
+    def mujoco_spec(self):
+        """A fresh mujoco.MjSpec of the hand; see models.hands.mujoco_spec."""
+        from models.hands.mujoco_spec import hand_spec
+
+        return hand_spec(self)
+
+    def describe(self) -> dict:
+        """Plain-data summary (what `drograsp hands --json` prints)."""
+        return {
+            "name": self.name,
+            "dof": self.dof,
+            "joints": [
+                {"name": n, "lower": float(lo), "upper": float(hi), "closing": int(c)}
+                for n, lo, hi, c in zip(
+                    self.joint_names, self.lower, self.upper, self.closing_direction, strict=True
+                )
+            ],
+            "fingertips": [{"name": t.name, "link": t.link} for t in self.meta.fingertips],
+            "anchor_fingers": list(self.meta.anchor_fingers),
+            "links": len(self.link_names),
+            "kp": self.meta.kp,
+            "source": self.meta.source,
+            "folder": str(self.folder),
+        }
+
+
+_CACHE: dict[Path, HandModel] = {}
+
+
+def load_hand(name_or_path: str | Path) -> HandModel:
+    """Load a built-in hand by name ("shadow", "allegro", "leap") or a user's hand from a
+    folder holding hand.urdf + hand.json (or the path of either file). Cached per folder."""
+    text = str(name_or_path)
+    candidate = Path(text).expanduser()
+    if (BUILTIN_DIR / text / "hand.json").is_file() and "/" not in text:
+        folder = BUILTIN_DIR / text
+    elif candidate.is_dir():
+        folder = candidate
+    elif candidate.is_file():
+        folder = candidate.parent
+    else:
+        raise HandError(
+            f"unknown hand {text!r}: built-in hands are {', '.join(available_hands())}; "
+            "or give a folder holding hand.urdf and hand.json"
+        )
+    folder = folder.resolve()
+    if folder not in _CACHE:
+        meta = read_meta(folder / "hand.json")
+        _CACHE[folder] = HandModel(folder, meta, read_urdf(folder / meta.urdf))
+    return _CACHE[folder]
