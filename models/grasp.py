@@ -1,0 +1,360 @@
+"""The Grasp record shared by the whole project, and the DexGraspBench per-grasp layout.
+
+A grasp is what a controller executes: the wrist pose and the finger joint values of three
+configurations, pregrasp -> grasp -> squeeze (BODex's rule: squeeze = 2 x grasp - pregrasp with
+the grasp's wrist). Poses are position xyz plus quaternion wxyz in the world (or object) frame;
+joint values follow the hand's grasp joint order (`hand.joint_names`).
+
+Records save and load as JSON or NPZ without pickle, so files are safe to share.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from models.errors import GraspError
+
+PHASES: tuple[str, ...] = ("pregrasp", "grasp", "squeeze")
+ROOT_SIZE = 7  # xyz + quaternion wxyz, DexGraspBench's root layout
+
+
+def _vector(value: Any, name: str, size: int | None = None) -> np.ndarray:
+    """A finite float vector of the given size, or a GraspError that names the field."""
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError) as err:
+        raise GraspError(f"{name}: not a numeric vector ({err})") from None
+    if arr.ndim != 1:
+        raise GraspError(f"{name}: expected a 1-D vector, got shape {arr.shape}")
+    if size is not None and arr.shape[0] != size:
+        raise GraspError(f"{name}: expected {size} values, got {arr.shape[0]}")
+    if not np.all(np.isfinite(arr)):
+        raise GraspError(f"{name}: contains NaN or infinite values: {arr.tolist()}")
+    return arr.copy()
+
+
+def _quaternion(value: Any, name: str) -> np.ndarray:
+    quat = _vector(value, name, 4)
+    norm = float(np.linalg.norm(quat))
+    if norm < 1e-8:
+        raise GraspError(f"{name}: zero quaternion (expected w, x, y, z with unit norm)")
+    return quat / norm
+
+
+@dataclass
+class Grasp:
+    """One grasp: wrist pose and joint values of the pregrasp, grasp and squeeze.
+
+    `pregrasp_wrist_*` and `squeeze_wrist_*` default to the grasp's wrist (BODex keeps the same
+    wrist for the squeeze; its pregrasp usually differs). `joint_names`, when given, records the
+    joint order so that a record can be checked against a hand and exported to other layouts.
+    """
+
+    hand: str
+    wrist_pos: np.ndarray
+    wrist_quat: np.ndarray
+    grasp: np.ndarray
+    pregrasp: np.ndarray
+    squeeze: np.ndarray
+    pregrasp_wrist_pos: np.ndarray | None = None
+    pregrasp_wrist_quat: np.ndarray | None = None
+    squeeze_wrist_pos: np.ndarray | None = None
+    squeeze_wrist_quat: np.ndarray | None = None
+    joint_names: tuple[str, ...] | None = None
+    anchors: np.ndarray | None = None
+    instruction: str | None = None
+    metrics: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.hand, str) or not self.hand:
+            raise GraspError(f"hand: expected a non-empty hand name, got {self.hand!r}")
+        self.wrist_pos = _vector(self.wrist_pos, "wrist_pos", 3)
+        self.wrist_quat = _quaternion(self.wrist_quat, "wrist_quat")
+        self.grasp = _vector(self.grasp, "grasp joints")
+        dof = self.grasp.shape[0]
+        if dof == 0:
+            raise GraspError("grasp joints: empty joint vector")
+        self.pregrasp = _vector(self.pregrasp, "pregrasp joints")
+        self.squeeze = _vector(self.squeeze, "squeeze joints")
+        for phase in ("pregrasp", "squeeze"):
+            n = getattr(self, phase).shape[0]
+            if n != dof:
+                raise GraspError(f"{phase} joints: {n} values but the grasp has {dof}")
+        for phase in ("pregrasp", "squeeze"):
+            pos_name, quat_name = f"{phase}_wrist_pos", f"{phase}_wrist_quat"
+            pos, quat = getattr(self, pos_name), getattr(self, quat_name)
+            if pos is not None:
+                setattr(self, pos_name, _vector(pos, pos_name, 3))
+            if quat is not None:
+                setattr(self, quat_name, _quaternion(quat, quat_name))
+        if self.joint_names is not None:
+            self.joint_names = tuple(str(n) for n in self.joint_names)
+            if len(self.joint_names) != dof:
+                raise GraspError(
+                    f"joint_names: {len(self.joint_names)} names for {dof} joint values"
+                )
+        if self.anchors is not None:
+            anchors = np.asarray(self.anchors, dtype=np.float64)
+            if anchors.ndim != 2 or anchors.shape[1] != 3:
+                raise GraspError(f"anchors: expected shape (K, 3), got {anchors.shape}")
+            if not np.all(np.isfinite(anchors)):
+                raise GraspError("anchors: contains NaN or infinite values")
+            self.anchors = anchors.copy()
+        if self.instruction is not None and not isinstance(self.instruction, str):
+            raise GraspError(f"instruction: expected a string, got {type(self.instruction)}")
+        if not isinstance(self.metrics, Mapping):
+            raise GraspError(f"metrics: expected a dict, got {type(self.metrics).__name__}")
+        self.metrics = dict(self.metrics)
+
+    # ------------------------------------------------------------------ access
+    @property
+    def dof(self) -> int:
+        return int(self.grasp.shape[0])
+
+    def joints(self, phase: str) -> np.ndarray:
+        """Joint values of `phase` (one of PHASES)."""
+        if phase not in PHASES:
+            raise GraspError(f"unknown phase {phase!r}; expected one of {PHASES}")
+        return getattr(self, phase)
+
+    def wrist_pose(self, phase: str = "grasp") -> np.ndarray:
+        """The 7-vector xyz + wxyz of the wrist in `phase` (the grasp's wrist if not set)."""
+        if phase not in PHASES:
+            raise GraspError(f"unknown phase {phase!r}; expected one of {PHASES}")
+        pos = self.wrist_pos if phase == "grasp" else getattr(self, f"{phase}_wrist_pos")
+        quat = self.wrist_quat if phase == "grasp" else getattr(self, f"{phase}_wrist_quat")
+        pos = self.wrist_pos if pos is None else pos
+        quat = self.wrist_quat if quat is None else quat
+        return np.concatenate([pos, quat])
+
+    def check_hand(self, joint_names: Sequence[str], hand: str | None = None) -> None:
+        """Raise GraspError unless the record fits a hand with these grasp joints."""
+        if len(joint_names) != self.dof:
+            raise GraspError(
+                f"grasp has {self.dof} joint values but hand {hand or self.hand!r} has "
+                f"{len(joint_names)} joints ({', '.join(joint_names)})"
+            )
+        if self.joint_names is not None and tuple(joint_names) != self.joint_names:
+            raise GraspError(
+                f"grasp joint order {self.joint_names} differs from the hand's {tuple(joint_names)}"
+            )
+
+    @classmethod
+    def with_bodex_squeeze(
+        cls,
+        hand: str,
+        wrist_pos: Any,
+        wrist_quat: Any,
+        grasp: Any,
+        pregrasp: Any,
+        **kwargs: Any,
+    ) -> Grasp:
+        """A grasp whose squeeze follows BODex's rule: 2 x grasp - pregrasp, same wrist."""
+        g = np.asarray(grasp, dtype=np.float64)
+        p = np.asarray(pregrasp, dtype=np.float64)
+        if g.shape != p.shape:
+            raise GraspError(f"pregrasp shape {p.shape} differs from grasp shape {g.shape}")
+        return cls(hand, wrist_pos, wrist_quat, g, p, 2.0 * g - p, **kwargs)
+
+    def moved(self, offset: Any) -> Grasp:
+        """The same grasp with every wrist pose translated by `offset` (world frame)."""
+        off = _vector(offset, "offset", 3)
+        d = self.to_dict()
+        for key in ("wrist_pos", "pregrasp_wrist_pos", "squeeze_wrist_pos"):
+            if d[key] is not None:
+                d[key] = (np.asarray(d[key]) + off).tolist()
+        return Grasp.from_dict(d)
+
+    # ------------------------------------------------------------------ serialization
+    def to_dict(self) -> dict[str, Any]:
+        """Plain JSON-compatible dict (lists, strings, numbers, None)."""
+
+        def lst(a: np.ndarray | None) -> list | None:
+            return None if a is None else np.asarray(a).tolist()
+
+        return {
+            "hand": self.hand,
+            "wrist_pos": lst(self.wrist_pos),
+            "wrist_quat": lst(self.wrist_quat),
+            "pregrasp": lst(self.pregrasp),
+            "grasp": lst(self.grasp),
+            "squeeze": lst(self.squeeze),
+            "pregrasp_wrist_pos": lst(self.pregrasp_wrist_pos),
+            "pregrasp_wrist_quat": lst(self.pregrasp_wrist_quat),
+            "squeeze_wrist_pos": lst(self.squeeze_wrist_pos),
+            "squeeze_wrist_quat": lst(self.squeeze_wrist_quat),
+            "joint_names": None if self.joint_names is None else list(self.joint_names),
+            "anchors": lst(self.anchors),
+            "instruction": self.instruction,
+            "metrics": dict(self.metrics),
+        }
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> Grasp:
+        known = set(cls.__dataclass_fields__)
+        unknown = set(data) - known
+        if unknown:
+            raise GraspError(f"unknown grasp fields {sorted(unknown)}; known: {sorted(known)}")
+        missing = {"hand", "wrist_pos", "wrist_quat", "grasp", "pregrasp", "squeeze"} - set(data)
+        if missing:
+            raise GraspError(f"grasp record lacks required fields {sorted(missing)}")
+        return cls(**dict(data))
+
+    def to_json(self) -> str:
+        return json.dumps(self.to_dict(), indent=1)
+
+    @classmethod
+    def from_json(cls, text: str) -> Grasp:
+        try:
+            data = json.loads(text)
+        except json.JSONDecodeError as err:
+            raise GraspError(f"not a JSON grasp record: {err}") from None
+        if not isinstance(data, dict):
+            raise GraspError("a JSON grasp record must be an object")
+        return cls.from_dict(data)
+
+    def to_arrays(self) -> dict[str, np.ndarray]:
+        """NPZ-ready arrays: numbers as float arrays, text (and metrics) as unicode scalars."""
+        out: dict[str, np.ndarray] = {}
+        for key, value in self.to_dict().items():
+            if value is None:
+                continue
+            if key in ("hand", "instruction"):
+                out[key] = np.array(value)
+            elif key == "metrics":
+                out[key] = np.array(json.dumps(value))
+            elif key == "joint_names":
+                out[key] = np.array(value, dtype=str)
+            else:
+                out[key] = np.asarray(value, dtype=np.float64)
+        return out
+
+    @classmethod
+    def from_arrays(cls, arrays: Mapping[str, np.ndarray]) -> Grasp:
+        data: dict[str, Any] = {}
+        for key in arrays:
+            value = np.asarray(arrays[key])
+            if key in ("hand", "instruction"):
+                data[key] = str(value)
+            elif key == "metrics":
+                data[key] = json.loads(str(value))
+            elif key == "joint_names":
+                data[key] = tuple(str(v) for v in value)
+            else:
+                data[key] = value
+        return cls.from_dict(data)
+
+    def save(self, path: str | Path) -> Path:
+        """Write as .json or .npz (chosen by the suffix)."""
+        path = Path(path)
+        if path.suffix == ".json":
+            path.write_text(self.to_json())
+        elif path.suffix == ".npz":
+            np.savez(path, **self.to_arrays())
+        else:
+            raise GraspError(f"{path}: grasp files must end in .json or .npz")
+        return path
+
+    @classmethod
+    def load(cls, path: str | Path) -> Grasp:
+        path = Path(path)
+        if not path.is_file():
+            raise GraspError(f"{path}: no such grasp file")
+        if path.suffix == ".json":
+            return cls.from_json(path.read_text())
+        if path.suffix == ".npz":
+            try:
+                with np.load(path, allow_pickle=False) as npz:
+                    return cls.from_arrays({k: npz[k] for k in npz.files})
+            except ValueError as err:
+                raise GraspError(f"{path}: unreadable grasp NPZ ({err})") from None
+        raise GraspError(f"{path}: grasp files must end in .json or .npz")
+
+
+# ---------------------------------------------------------------------- DexGraspBench layout
+def _xml_index(
+    joint_names: Sequence[str], xml_joint_names: Sequence[str], joint_map: Mapping[str, str] | None
+) -> list[int]:
+    """For each grasp joint, its index in the XML's joint order."""
+    joint_map = dict(joint_map or {})
+    unknown = set(joint_map) - set(joint_names)
+    if unknown:
+        raise GraspError(f"joint map names joints the hand lacks: {sorted(unknown)}")
+    index = {name: i for i, name in enumerate(xml_joint_names)}
+    out = []
+    for name in joint_names:
+        xml_name = joint_map.get(name, name)
+        if xml_name not in index:
+            raise GraspError(
+                f"joint {name!r} maps to {xml_name!r}, which is not in the XML's joints "
+                f"{list(xml_joint_names)}; pass a joint map"
+            )
+        out.append(index[xml_name])
+    if len(set(out)) != len(out):
+        raise GraspError("joint map sends two grasp joints to the same XML joint")
+    return out
+
+
+def from_dexgraspbench(
+    pregrasp_qpos: Any,
+    grasp_qpos: Any,
+    squeeze_qpos: Any,
+    *,
+    hand: str,
+    joint_names: Sequence[str],
+    xml_joint_names: Sequence[str],
+    joint_map: Mapping[str, str] | None = None,
+    **kwargs: Any,
+) -> Grasp:
+    """A Grasp from DexGraspBench's per-grasp rows (7 root values, then the XML's joints).
+
+    `joint_map` maps grasp joint names to XML joint names where they differ.
+    """
+    idx = _xml_index(joint_names, xml_joint_names, joint_map)
+    rows = {}
+    for phase, row in zip(PHASES, (pregrasp_qpos, grasp_qpos, squeeze_qpos), strict=True):
+        rows[phase] = _vector(row, f"{phase}_qpos", ROOT_SIZE + len(xml_joint_names))
+    grasp_root, pre_root, sq_root = rows["grasp"][:7], rows["pregrasp"][:7], rows["squeeze"][:7]
+    return Grasp(
+        hand=hand,
+        wrist_pos=grasp_root[:3],
+        wrist_quat=grasp_root[3:],
+        grasp=rows["grasp"][ROOT_SIZE:][idx],
+        pregrasp=rows["pregrasp"][ROOT_SIZE:][idx],
+        squeeze=rows["squeeze"][ROOT_SIZE:][idx],
+        pregrasp_wrist_pos=pre_root[:3],
+        pregrasp_wrist_quat=pre_root[3:],
+        squeeze_wrist_pos=sq_root[:3],
+        squeeze_wrist_quat=sq_root[3:],
+        joint_names=tuple(joint_names),
+        **kwargs,
+    )
+
+
+def to_dexgraspbench(
+    grasp: Grasp,
+    *,
+    xml_joint_names: Sequence[str],
+    joint_names: Sequence[str] | None = None,
+    joint_map: Mapping[str, str] | None = None,
+    fill: float = 0.0,
+) -> dict[str, np.ndarray]:
+    """DexGraspBench rows {pregrasp,grasp,squeeze}_qpos for `grasp`; unmapped XML joints = fill."""
+    names = tuple(joint_names or grasp.joint_names or ())
+    if not names:
+        raise GraspError("to_dexgraspbench needs the grasp's joint names")
+    grasp.check_hand(names)
+    idx = _xml_index(names, xml_joint_names, joint_map)
+    out = {}
+    for phase in PHASES:
+        row = np.full(ROOT_SIZE + len(xml_joint_names), fill, dtype=np.float64)
+        row[:ROOT_SIZE] = grasp.wrist_pose(phase)
+        row[ROOT_SIZE:][idx] = grasp.joints(phase)
+        out[f"{phase}_qpos"] = row
+    return out

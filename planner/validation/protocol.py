@@ -1,0 +1,132 @@
+"""The simulated grasp test, as settings: DexGraspBench's protocol and the paper's variant.
+
+Every number here is a fact read from DexGraspBench's evaluator (see
+../shared/reference/dexgraspbench/README.md); `get_protocol(name, **overrides)` changes any of
+them, so experiments never need to edit code.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Any
+
+from models.errors import DrograspError
+
+#: World directions of the external force, in DexGraspBench's order.
+DIRECTIONS: tuple[tuple[float, float, float], ...] = (
+    (-1.0, 0.0, 0.0),
+    (1.0, 0.0, 0.0),
+    (0.0, -1.0, 0.0),
+    (0.0, 1.0, 0.0),
+    (0.0, 0.0, -1.0),
+    (0.0, 0.0, 1.0),
+)
+
+
+class ProtocolError(DrograspError, ValueError):
+    """Unknown preset or an invalid protocol setting."""
+
+
+@dataclass(frozen=True)
+class Protocol:
+    """Settings of the MuJoCo grasp test (defaults: DexGraspBench's evaluator)."""
+
+    # Physics options.
+    timestep: float = 0.004
+    integrator: str = "implicitfast"
+    solver: str = "newton"
+    cone: str = "elliptic"
+    impratio: float = 10.0
+    noslip_iterations: int = 2
+    gravity: bool = False
+    # Contact parameters: every geom, and the hand's geoms (stiff contacts, little penetration).
+    condim: int = 4
+    friction: tuple[float, float] = (0.6, 0.02)
+    hand_solimp: tuple[float, float, float] = (0.5, 0.99, 0.0001)
+    hand_solref: tuple[float, float] = (0.005, 1.0)
+    weld_solimp: tuple[float, float, float, float, float] = (0.9, 0.95, 0.001, 0.5, 2.0)
+    # Object: mass set through density; its weight emulated by force_scale x mass along a direction.
+    object_mass: float = 0.1
+    force_scale: float = 10.0
+    directions: tuple[tuple[float, float, float], ...] = DIRECTIONS
+    # Motion: pregrasp -> grasp -> squeeze, each `waypoints` x `substeps` steps.
+    waypoints: int = 10
+    substeps: int = 10
+    # Test: hold the force `hold_time` s, check every `check_interval` s.
+    hold_time: float = 2.0
+    check_interval: float = 0.2
+    max_translation: float = 0.05  # m
+    max_rotation_deg: float = 15.0
+    max_pregrasp_penetration: float = 0.01  # m; deeper hand-object penetration fails at once
+    # Static metrics at the grasp (not part of the verdict).
+    contact_margin: float = 0.01
+    contact_threshold: float = 0.002
+    # Speed: simulate the closing once and copy it per direction; stop at the first failure.
+    share_closing: bool = True
+    all_directions: bool = False
+
+    def __post_init__(self) -> None:
+        positive = ("timestep", "impratio", "object_mass", "hold_time", "check_interval")
+        for name in positive:
+            if not getattr(self, name) > 0:
+                raise ProtocolError(f"protocol {name} must be positive, got {getattr(self, name)}")
+        if self.waypoints < 1 or self.substeps < 1:
+            raise ProtocolError("protocol waypoints and substeps must be at least 1")
+        if not self.directions:
+            raise ProtocolError("protocol needs at least one force direction")
+        if self.integrator not in ("euler", "implicit", "implicitfast", "rk4"):
+            raise ProtocolError(f"unknown integrator {self.integrator!r}")
+        if self.solver not in ("newton", "cg", "pgs"):
+            raise ProtocolError(f"unknown solver {self.solver!r}")
+        if self.cone not in ("elliptic", "pyramidal"):
+            raise ProtocolError(f"unknown friction cone {self.cone!r}")
+
+    @property
+    def steps_per_check(self) -> int:
+        return max(1, round(self.check_interval / self.timestep))
+
+    @property
+    def checks(self) -> int:
+        return max(1, round(self.hold_time / self.check_interval))
+
+    def physics_key(self) -> tuple:
+        """The settings baked into a compiled model (the cache key of a scene)."""
+        return (
+            self.timestep,
+            self.integrator,
+            self.solver,
+            self.cone,
+            self.impratio,
+            self.noslip_iterations,
+            self.gravity,
+            self.condim,
+            self.friction,
+            self.hand_solimp,
+            self.hand_solref,
+            self.weld_solimp,
+            self.object_mass,
+        )
+
+    def replace(self, **overrides: Any) -> Protocol:
+        unknown = set(overrides) - {f.name for f in dataclasses.fields(self)}
+        if unknown:
+            raise ProtocolError(f"unknown protocol settings {sorted(unknown)}")
+        return dataclasses.replace(self, **overrides)
+
+
+PRESETS: dict[str, Protocol] = {
+    "dexgraspbench": Protocol(),
+    "paper": Protocol(hold_time=3.0),
+}
+
+
+def get_protocol(preset: str | Protocol = "dexgraspbench", **overrides: Any) -> Protocol:
+    """A preset by name (or a Protocol), with any setting overridden."""
+    if isinstance(preset, Protocol):
+        base = preset
+    else:
+        if preset not in PRESETS:
+            raise ProtocolError(f"unknown protocol preset {preset!r}; choose from {list(PRESETS)}")
+        base = PRESETS[preset]
+    return base.replace(**overrides) if overrides else base

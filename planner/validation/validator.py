@@ -1,0 +1,285 @@
+"""Does a grasp hold? DexGraspBench's test in MuJoCo, with the closing simulated once.
+
+The closing (pregrasp -> grasp -> squeeze) runs with no external force, so its end state is the
+same for every force direction: it is simulated once and copied (mj_copyData) into each
+direction's test, which then holds the force and checks the object's displacement. The verdict
+equals DexGraspBench's, which re-simulates the closing per direction.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import mujoco
+import numpy as np
+from scipy.spatial.transform import Rotation, Slerp
+
+from models.grasp import Grasp
+from planner.validation.hands import HandAdapter, as_hand
+from planner.validation.objects import CollisionObject, as_collision_object
+from planner.validation.protocol import Protocol, get_protocol
+from planner.validation.scene import Scene, get_scene
+
+IDENTITY_POSE = np.array([0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0])
+
+
+@dataclass
+class DirectionResult:
+    """The object's displacement at the end of one direction's hold (or at its failure)."""
+
+    direction: tuple[float, float, float]
+    translation: float  # m
+    rotation_deg: float
+    held: bool
+    hold_time: float  # s simulated under the force
+
+
+@dataclass
+class ValidationResult:
+    """Verdict and measurements of one grasp."""
+
+    success: bool
+    reason: str  # "held", "pregrasp_penetration", or "slipped"
+    directions: list[DirectionResult] = field(default_factory=list)
+    translation: float = 0.0  # m, worst over the directions tested
+    rotation_deg: float = 0.0  # worst over the directions tested
+    pregrasp_penetration: float = 0.0  # m, deepest hand-object penetration at the pregrasp
+    grasp_penetration: float = 0.0  # m, same at the grasp configuration
+    contact_count: int = 0  # hand bodies within the contact threshold at the grasp
+    object_mass: float = 0.0  # kg, as compiled
+    simulated_time: float = 0.0  # s of physics simulated for this grasp
+    wall_time: float = 0.0  # s
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        d["directions"] = [asdict(r) | {"direction": list(r.direction)} for r in self.directions]
+        return d
+
+
+# ---------------------------------------------------------------------- geometry helpers
+def _pose(value: Any) -> np.ndarray:
+    pose = np.asarray(IDENTITY_POSE if value is None else value, dtype=np.float64)
+    if pose.shape != (7,) or not np.all(np.isfinite(pose)):
+        from models.errors import ObjectError
+
+        raise ObjectError(f"object pose must be 7 finite values (xyz + wxyz), got {pose}")
+    pose = pose.copy()
+    pose[3:] /= np.linalg.norm(pose[3:])
+    return pose
+
+
+def _displacement(initial: np.ndarray, current: np.ndarray) -> tuple[float, float]:
+    """Translation (m) and rotation angle (deg) between two xyz+wxyz poses."""
+    translation = float(np.linalg.norm(current[:3] - initial[:3]))
+    q0 = initial[3:] / np.linalg.norm(initial[3:])
+    q1 = current[3:] / np.linalg.norm(current[3:])
+    w = min(1.0, abs(float(np.dot(q0, q1))))  # |w| of q1 * q0^-1
+    return translation, float(np.degrees(2.0 * np.arccos(w)))
+
+
+def _interpolate(pose_a: np.ndarray, pose_b: np.ndarray, n: int) -> np.ndarray:
+    """n wrist waypoints after pose_a up to pose_b: linear position, slerp rotation."""
+    rots = Rotation.from_quat(np.stack([pose_a[3:], pose_b[3:]]), scalar_first=True)
+    s = np.linspace(0.0, 1.0, n + 1)[1:]
+    pos = pose_a[:3] + s[:, None] * (pose_b[:3] - pose_a[:3])
+    quat = Slerp([0.0, 1.0], rots)(s).as_quat(scalar_first=True)
+    return np.concatenate([pos, quat], axis=1)
+
+
+# ---------------------------------------------------------------------- simulation steps
+def _set_configuration(
+    scene: Scene, data: mujoco.MjData, wrist: np.ndarray, joints: np.ndarray, obj_pose: np.ndarray
+) -> None:
+    """Reset `data` to a static configuration with the mocap at the wrist."""
+    mujoco.mj_resetData(scene.model, data)
+    data.qpos[scene.wrist_qpos : scene.wrist_qpos + 7] = wrist
+    data.qpos[scene.joint_qpos] = joints
+    data.qpos[scene.object_qpos : scene.object_qpos + 7] = obj_pose
+    data.mocap_pos[scene.mocap] = wrist[:3]
+    data.mocap_quat[scene.mocap] = wrist[3:]
+
+
+def _hand_object_contacts(scene: Scene, data: mujoco.MjData) -> tuple[list[float], list[int]]:
+    """Distances of hand-object contacts and the hand body of each."""
+    m = scene.model
+    dists, bodies = [], []
+    for i in range(data.ncon):
+        c = data.contact[i]
+        b1, b2 = int(m.geom_bodyid[c.geom1]), int(m.geom_bodyid[c.geom2])
+        if b2 == scene.object_body and scene.hand_body[b1]:
+            dists.append(float(c.dist))
+            bodies.append(b1)
+        elif b1 == scene.object_body and scene.hand_body[b2]:
+            dists.append(float(c.dist))
+            bodies.append(b2)
+    return dists, bodies
+
+
+def _grasp_contacts(
+    scene: Scene, grasp: Grasp, obj_pose: np.ndarray, protocol: Protocol
+) -> tuple[float, int]:
+    """Penetration and contact count at the static grasp, with a wider object margin."""
+    m, d = scene.model, scene.scratch
+    saved_margin = m.geom_margin[scene.object_geoms].copy()
+    saved_gap = m.geom_gap[scene.object_geoms].copy()
+    try:
+        m.geom_margin[scene.object_geoms] = protocol.contact_margin
+        m.geom_gap[scene.object_geoms] = protocol.contact_margin
+        _set_configuration(scene, d, grasp.wrist_pose("grasp"), grasp.grasp, obj_pose)
+        mujoco.mj_forward(m, d)
+        dists, bodies = _hand_object_contacts(scene, d)
+    finally:
+        m.geom_margin[scene.object_geoms] = saved_margin
+        m.geom_gap[scene.object_geoms] = saved_gap
+    touching = {
+        b for dist, b in zip(dists, bodies, strict=True) if abs(dist) < protocol.contact_threshold
+    }
+    return max(0.0, -min(dists, default=0.0)), len(touching)
+
+
+def _ctrl_map(scene: Scene, data: mujoco.MjData) -> np.ndarray:
+    """ctrl = moment x joint targets: maps grasp joints to actuator targets (tendons included)."""
+    m = scene.model
+    moment = np.zeros((m.nu, m.nv))
+    mujoco.mju_sparse2dense(
+        moment, data.actuator_moment, data.moment_rownnz, data.moment_rowadr, data.moment_colind
+    )
+    return moment[:, scene.joint_dof]
+
+
+def _move(
+    scene: Scene,
+    data: mujoco.MjData,
+    wrists: tuple[np.ndarray, np.ndarray],
+    ctrls: tuple[np.ndarray, np.ndarray],
+    protocol: Protocol,
+) -> None:
+    """Drive mocap and actuator targets from one configuration to the next in waypoints."""
+    m, n = scene.model, protocol.waypoints
+    poses = _interpolate(wrists[0], wrists[1], n)
+    targets = np.linspace(ctrls[0], ctrls[1], n + 1)[1:]
+    for k in range(n):
+        data.mocap_pos[scene.mocap] = poses[k, :3]
+        data.mocap_quat[scene.mocap] = poses[k, 3:]
+        data.ctrl[:] = targets[k]
+        mujoco.mj_forward(m, data)
+        for _ in range(protocol.substeps):
+            mujoco.mj_step(m, data)
+
+
+def _close(
+    scene: Scene, data: mujoco.MjData, grasp: Grasp, obj_pose: np.ndarray, protocol: Protocol
+) -> float:
+    """Reset to the pregrasp and run pregrasp -> grasp -> squeeze; returns simulated seconds."""
+    wrists = [grasp.wrist_pose(p) for p in ("pregrasp", "grasp", "squeeze")]
+    _set_configuration(scene, data, wrists[0], grasp.pregrasp, obj_pose)
+    mujoco.mj_forward(scene.model, data)
+    cmap = _ctrl_map(scene, data)
+    ctrls = [cmap @ grasp.pregrasp, cmap @ grasp.grasp, cmap @ grasp.squeeze]
+    data.ctrl[:] = ctrls[0]
+    mujoco.mj_forward(scene.model, data)
+    _move(scene, data, (wrists[0], wrists[1]), (ctrls[0], ctrls[1]), protocol)
+    _move(scene, data, (wrists[1], wrists[2]), (ctrls[1], ctrls[2]), protocol)
+    return 2 * protocol.waypoints * protocol.substeps * protocol.timestep
+
+
+def _hold(
+    scene: Scene,
+    data: mujoco.MjData,
+    direction: np.ndarray,
+    obj_pose: np.ndarray,
+    protocol: Protocol,
+) -> DirectionResult:
+    """Apply the force along `direction` and check the object's displacement periodically."""
+    m = scene.model
+    data.xfrc_applied[:] = 0.0
+    data.xfrc_applied[scene.object_body, :3] = (
+        protocol.force_scale * protocol.object_mass * direction
+    )
+    q = scene.object_qpos
+    translation = rotation = 0.0
+    held = True
+    checks_done = 0
+    for _ in range(protocol.checks):
+        for _ in range(protocol.steps_per_check):
+            mujoco.mj_step(m, data)
+        checks_done += 1
+        translation, rotation = _displacement(obj_pose, data.qpos[q : q + 7])
+        if not (translation < protocol.max_translation and rotation < protocol.max_rotation_deg):
+            held = False
+            break
+    hold_time = checks_done * protocol.steps_per_check * protocol.timestep
+    return DirectionResult(
+        tuple(float(x) for x in direction), translation, rotation, held, hold_time
+    )
+
+
+# ---------------------------------------------------------------------- public API
+def validate(
+    grasp: Grasp,
+    obj: Any,
+    hand: Any,
+    protocol: str | Protocol = "dexgraspbench",
+    *,
+    object_pose: Any = None,
+    all_directions: bool | None = None,
+) -> ValidationResult:
+    """Simulate `grasp` on `obj` (collision pieces, see objects.as_collision_object) with
+    `hand` (name, MJCF path or HandAdapter) and return the verdict with its measurements.
+
+    `object_pose` (xyz + wxyz, default identity) places the object; `all_directions` overrides
+    the protocol's early stop at the first failing direction.
+    """
+    start = time.perf_counter()
+    proto = get_protocol(protocol)
+    if all_directions is not None:
+        proto = proto.replace(all_directions=all_directions)
+    adapter: HandAdapter = as_hand(hand)
+    grasp.check_hand(adapter.joint_names, adapter.name)
+    body: CollisionObject = as_collision_object(obj)
+    obj_pose = _pose(object_pose)
+    scene = get_scene(adapter, body, proto)
+    m, d = scene.model, scene.data
+
+    grasp_pen, contact_count = _grasp_contacts(scene, grasp, obj_pose, proto)
+    result = ValidationResult(
+        success=False,
+        reason="pregrasp_penetration",
+        grasp_penetration=grasp_pen,
+        contact_count=contact_count,
+        object_mass=scene.object_mass,
+    )
+    _set_configuration(scene, d, grasp.wrist_pose("pregrasp"), grasp.pregrasp, obj_pose)
+    mujoco.mj_forward(m, d)
+    dists, _ = _hand_object_contacts(scene, d)
+    result.pregrasp_penetration = max(0.0, -min(dists, default=0.0))
+    if result.pregrasp_penetration > proto.max_pregrasp_penetration:
+        result.wall_time = time.perf_counter() - start
+        return result
+
+    simulated = 0.0
+    if proto.share_closing:
+        simulated += _close(scene, d, grasp, obj_pose, proto)
+    success = True
+    for direction in np.asarray(proto.directions, dtype=np.float64):
+        if proto.share_closing:
+            mujoco.mj_copyData(scene.scratch, m, d)
+            run = scene.scratch
+        else:  # DexGraspBench's way: re-simulate the closing for every direction
+            run = scene.scratch
+            simulated += _close(scene, run, grasp, obj_pose, proto)
+        outcome = _hold(scene, run, direction, obj_pose, proto)
+        simulated += outcome.hold_time
+        result.directions.append(outcome)
+        success = success and outcome.held
+        if not outcome.held and not proto.all_directions:
+            break
+    result.success = success
+    result.reason = "held" if success else "slipped"
+    result.translation = max(r.translation for r in result.directions)
+    result.rotation_deg = max(r.rotation_deg for r in result.directions)
+    result.simulated_time = simulated
+    result.wall_time = time.perf_counter() - start
+    return result
