@@ -120,8 +120,8 @@ def read_urdf(path: Path) -> KinematicTree:
     children: dict[str, list[str]] = {}
     for j in joints.values():
         children.setdefault(j.parent, []).append(j.child)
-    while frontier:
-        link = frontier.pop(0)
+    while frontier:  # depth first, children in file order: the order MuJoCo and Menagerie use
+        link = frontier.pop()
         order.append(link)
-        frontier.extend(children.get(link, []))
+        frontier.extend(reversed(children.get(link, [])))
     return KinematicTree(root_elem.get("name", path.stem), roots[0], order, joints, geoms)

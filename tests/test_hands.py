@@ -1,0 +1,218 @@
+"""Hands: one description, identical kinematics in PyTorch, Drake and MuJoCo."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+
+import mujoco
+import numpy as np
+import pytest
+import torch
+from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
+from pydrake.systems.framework import DiagramBuilder
+
+from models.errors import HandError
+from models.hands import load_hand
+from models.hands.mujoco_spec import WRIST_JOINT
+from models.hands.primitives import signed_distance
+from tests.conftest import reference_dir
+
+
+def random_configs(hand, n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    q = rng.uniform(hand.lower, hand.upper, size=(n, hand.dof))
+    quat = rng.normal(size=(n, 4))
+    wrist = np.concatenate(
+        [rng.uniform(-0.3, 0.3, (n, 3)), quat / np.linalg.norm(quat, axis=1)[:, None]], 1
+    )
+    return wrist, q
+
+
+def drake_hand(hand, filter_self_collisions=True):
+    builder = DiagramBuilder()
+    plant, scene_graph = AddMultibodyPlantSceneGraph(builder, 0.0)
+    handle = hand.add_to_plant(plant, scene_graph, filter_self_collisions=filter_self_collisions)
+    plant.Finalize()
+    diagram = builder.Build()
+    context = plant.GetMyContextFromRoot(diagram.CreateDefaultContext())
+    return plant, handle, context
+
+
+def mujoco_hand(hand):
+    model = hand.mujoco_spec().compile()
+    qadr = {
+        mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, j): model.jnt_qposadr[j]
+        for j in range(model.njnt)
+    }
+    return model, mujoco.MjData(model), qadr
+
+
+def set_mujoco(hand, model, data, qadr, wrist, q) -> None:
+    data.qpos[qadr[WRIST_JOINT] : qadr[WRIST_JOINT] + 7] = wrist
+    for name, value in zip(hand.joint_names, q, strict=True):
+        data.qpos[qadr[name]] = value
+    mujoco.mj_forward(model, data)
+
+
+def test_fk_agrees_in_torch_drake_mujoco(hand_name):
+    hand = load_hand(hand_name)
+    wrist, q = random_configs(hand, 100)
+    torch_poses = hand.link_poses(torch.tensor(wrist), torch.tensor(q)).numpy()
+    plant, handle, context = drake_hand(hand)
+    model, data, qadr = mujoco_hand(hand)
+    worst = 0.0
+    for k in range(len(q)):
+        handle.set_state(plant, context, wrist[k], q[k])
+        set_mujoco(hand, model, data, qadr, wrist[k], q[k])
+        for i, link in enumerate(hand.link_names):
+            x_drake = plant.EvalBodyPoseInWorld(context, plant.GetBodyByName(link, handle.instance))
+            x_mj = data.xpos[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, link)]
+            worst = max(
+                worst,
+                np.abs(x_drake.translation() - torch_poses[k, i, :3, 3]).max(),
+                np.abs(x_mj - torch_poses[k, i, :3, 3]).max(),
+            )
+    assert worst < 1e-5, f"link origins differ by {worst:.2e} m"
+
+
+def test_fk_batch_float32_matches_float64(hand_name):
+    hand = load_hand(hand_name)
+    wrist, q = random_configs(hand, 16, seed=1)
+    p64 = hand.surface_points(torch.tensor(wrist), torch.tensor(q))
+    p32 = hand.surface_points(
+        torch.tensor(wrist, dtype=torch.float32), torch.tensor(q, dtype=torch.float32)
+    )
+    assert p64.shape == (16, 512, 3)
+    assert torch.allclose(p64.float(), p32, atol=1e-5)
+
+
+MENAGERIE = {
+    "shadow": "shadow_hand/right_hand.xml",
+    "allegro": "wonik_allegro/right_hand.xml",
+    "leap": "leap_hand/right_hand.xml",
+}
+
+
+@pytest.mark.parametrize("hand_name", sorted(MENAGERIE))
+def test_fingertips_match_menagerie(hand_name):
+    """Joints matched by name, palm frames aligned: our root link frame is the vendor's
+    root body frame (no fixed offset)."""
+    hand = load_hand(hand_name)
+    vendor = mujoco.MjModel.from_xml_path(str(reference_dir("hands") / MENAGERIE[hand_name]))
+    data = mujoco.MjData(vendor)
+    root = mujoco.mj_name2id(vendor, mujoco.mjtObj.mjOBJ_BODY, hand.root_link)
+    _, q = random_configs(hand, 50, seed=2)
+    identity = torch.tensor([[0, 0, 0, 1.0, 0, 0, 0]]).repeat(len(q), 1).double()
+    ours = hand.fingertip_positions(identity, torch.tensor(q)).numpy()
+    worst = 0.0
+    for k in range(len(q)):
+        data.qpos[:] = 0
+        for name, value in zip(hand.joint_names, q[k], strict=True):
+            j = mujoco.mj_name2id(vendor, mujoco.mjtObj.mjOBJ_JOINT, name)
+            data.qpos[vendor.jnt_qposadr[j]] = value
+        mujoco.mj_kinematics(vendor, data)
+        r_root, p_root = data.xmat[root].reshape(3, 3), data.xpos[root]
+        for f, tip in enumerate(hand.meta.fingertips):
+            b = mujoco.mj_name2id(vendor, mujoco.mjtObj.mjOBJ_BODY, tip.link)
+            world = data.xmat[b].reshape(3, 3) @ tip.point + data.xpos[b]
+            worst = max(worst, np.linalg.norm(r_root.T @ (world - p_root) - ours[k, f]))
+    print(f"{hand_name}: worst fingertip error against Menagerie {worst * 1000:.4f} mm")
+    assert worst < 3e-3
+
+
+def test_open_pose_has_no_self_collision(hand_name):
+    hand = load_hand(hand_name)
+    identity = np.array([0, 0, 0, 1.0, 0, 0, 0])
+    model, data, qadr = mujoco_hand(hand)
+    set_mujoco(hand, model, data, qadr, identity, hand.open_pose)
+    assert data.ncon == 0
+    plant, handle, context = drake_hand(hand, filter_self_collisions=False)
+    handle.set_state(plant, context, identity, hand.open_pose)
+    query = plant.get_geometry_query_input_port().Eval(context)
+    assert query.ComputePointPairPenetration() == []
+    # the check can fail: a fist drives fingers into each other and the palm
+    fist = hand.lower + 0.95 * (hand.upper - hand.lower) * (hand.closing_direction > 0)
+    set_mujoco(hand, model, data, qadr, identity, fist)
+    handle.set_state(plant, context, identity, fist)
+    assert data.ncon > 0 or query.ComputePointPairPenetration() != []
+
+
+def test_surface_points_lie_on_link_geometry(hand_name):
+    hand = load_hand(hand_name)
+    idx, local = hand.surface
+    assert idx.shape == (512,) and local.shape == (512, 3)
+    assert len(set(idx)) == len(hand.link_names), "every link carries surface points"
+    for li, link in enumerate(hand.link_names):
+        pts = local[idx == li]
+        dist = np.min([signed_distance(g, pts) for g in hand.tree.geoms[link]], axis=0)
+        assert np.abs(dist).max() < 5e-4, f"{link}: {np.abs(dist).max():.2e} m off the surface"
+
+
+def test_surface_points_are_fixed_across_loads(hand_name):
+    hand = load_hand(hand_name)
+    idx, local = hand.surface
+    fresh = type(hand)(hand.folder, hand.meta, hand.tree)
+    np.testing.assert_array_equal(idx, fresh.surface[0])
+    np.testing.assert_array_equal(local, fresh.surface[1])
+
+
+def test_unknown_hand_lists_available():
+    with pytest.raises(HandError, match="allegro, leap, shadow"):
+        load_hand("nohand")
+
+
+def test_wrong_joint_vector_names_expected_dof(hand_name):
+    hand = load_hand(hand_name)
+    wrist = torch.tensor([[0, 0, 0, 1.0, 0, 0, 0]])
+    with pytest.raises(HandError, match=f"expected {hand.dof} values.*{hand.joint_names[0]}"):
+        hand.link_poses(wrist, torch.zeros(1, hand.dof + 1))
+    with pytest.raises(HandError, match="NaN"):
+        hand.check_joints(np.full(hand.dof, np.nan))
+
+
+def test_user_hand_loads_from_folder(tmp_path, hand_name):
+    builtin = load_hand(hand_name)
+    folder = tmp_path / "myhand"
+    shutil.copytree(builtin.folder, folder)
+    meta = json.loads((folder / "hand.json").read_text())
+    meta["name"] = "myhand"
+    (folder / "hand.json").write_text(json.dumps(meta))
+    mine = load_hand(folder)
+    assert mine.name == "myhand" and mine.dof == builtin.dof
+    assert mine.mujoco_spec().compile().nu == builtin.dof
+
+
+def test_user_hand_missing_metadata_names_fields(tmp_path):
+    folder = tmp_path / "partial"
+    shutil.copytree(load_hand("allegro").folder, folder)
+    meta = json.loads((folder / "hand.json").read_text())
+    del meta["fingertips"], meta["palm"]["normal"]
+    (folder / "hand.json").write_text(json.dumps(meta))
+    with pytest.raises(HandError, match="missing fields: fingertips, palm.normal"):
+        load_hand(folder)
+    (folder / "hand.json").unlink()
+    with pytest.raises(HandError, match="needs hand.urdf and hand.json"):
+        load_hand(folder)
+
+
+def test_cli_hands_json():
+    out = subprocess.run(
+        [sys.executable, "-m", "planner.cli", "hands", "--json"],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    hands = {h["name"]: h for h in json.loads(out.stdout)}
+    assert {"shadow": 22, "allegro": 16, "leap": 16} == {n: h["dof"] for n, h in hands.items()}
+    assert all(len(h["anchor_fingers"]) == 4 for h in hands.values())
+
+
+def test_cli_unknown_hand_is_a_clear_error():
+    out = subprocess.run(
+        [sys.executable, "-m", "planner.cli", "hands", "nohand"], capture_output=True, text=True
+    )
+    assert out.returncode == 2
+    assert "unknown hand 'nohand'" in out.stderr and "Traceback" not in out.stderr
