@@ -26,7 +26,7 @@ FREE_JOINT = "wrist_free"
 WELD = "wrist_weld"
 MJCF_PREFIX = "hand/"
 # MuJoCo's weld data as the XML parser leaves it: anchor 0, relpose from qpos0, torquescale 1.
-_WELD_DATA = [0.0] * 10 + [1.0, 0.0]
+WELD_DATA = [0.0] * 10 + [1.0, 0.0]
 
 
 @dataclass(frozen=True)
@@ -94,7 +94,7 @@ def _mjcf_spec(xml_path: str) -> mujoco.MjSpec:
         name1=MOCAP_BODY,
         name2=root.name,
         objtype=mujoco.mjtObj.mjOBJ_BODY,
-        data=_WELD_DATA,
+        data=WELD_DATA,
     )
     return spec
 

@@ -14,7 +14,7 @@ import mujoco
 import numpy as np
 
 from models.errors import HandError
-from planner.validation.hands import FREE_JOINT, MOCAP_BODY, HandAdapter
+from planner.validation.hands import FREE_JOINT, MOCAP_BODY, WELD, WELD_DATA, HandAdapter
 from planner.validation.objects import CollisionObject
 from planner.validation.protocol import Protocol
 
@@ -91,7 +91,10 @@ def build_scene(hand: HandAdapter, obj: CollisionObject, protocol: Protocol) -> 
         geom.solimp[:3] = protocol.hand_solimp
         geom.solref[:2] = protocol.hand_solref
     for eq in spec.equalities:
-        if eq.type == mujoco.mjtEq.mjEQ_WELD:
+        if eq.name == WELD:
+            # Anchor 0 and relpose from qpos0 (MuJoCo's XML defaults; MjSpec's API default
+            # anchor is (0, 1, 0)), and the protocol's weld impedance.
+            eq.data[:] = WELD_DATA
             eq.solimp[:] = protocol.weld_solimp
     volume = obj.mass_volume()
     if not volume > 0:

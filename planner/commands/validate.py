@@ -1,0 +1,179 @@
+"""`drograsp validate`: check grasps in DexGraspBench's layout with the MuJoCo validator.
+
+Reads an NPZ like ../shared/reference/dexgraspbench/grasps.npz (object, scale, obj_pose and
+{pregrasp,grasp,squeeze}_qpos rows: 7 root values then the hand XML's joints), prints the success
+rate and mean displacement, and the agreement with `reference_success` when the file has it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from models.errors import DrograspError, GraspError
+from models.grasp import Grasp, from_dexgraspbench
+from planner.validation.batch import validate_many
+from planner.validation.hands import HandAdapter, mjcf_hand, mjcf_joint_names, project_hand
+from planner.validation.objects import find_object
+from planner.validation.protocol import PRESETS, get_protocol
+
+LAYOUT_KEYS = ("object", "scale", "pregrasp_qpos", "grasp_qpos", "squeeze_qpos")
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser(
+        "validate",
+        help="simulate grasps (DexGraspBench layout) and report which hold",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("file", type=Path, help="grasps NPZ in DexGraspBench's layout")
+    hand = p.add_mutually_exclusive_group(required=True)
+    hand.add_argument("--hand-xml", type=Path, help="MJCF hand whose joint order the rows follow")
+    hand.add_argument("--hand", help="built-in hand name (rows follow its joint order)")
+    p.add_argument("--joint-map", type=Path, help="JSON {grasp joint: XML joint} for --hand-xml")
+    p.add_argument("--objects", type=Path, required=True, help="folder of <object>/convex_pieces")
+    p.add_argument("--preset", default="dexgraspbench", choices=sorted(PRESETS))
+    p.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override a protocol setting, e.g. --set hold_time=3 (repeatable)",
+    )
+    p.add_argument("--all-directions", action="store_true", help="test all six directions")
+    p.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
+    p.add_argument("--limit", type=int, default=None, help="validate only the first N grasps")
+    p.add_argument("--json", action="store_true", help="print the summary as JSON")
+    p.add_argument("--out", type=Path, help="write per-grasp results to this JSON file")
+    p.set_defaults(func=run)
+
+
+def _overrides(items: list[str]) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep:
+            raise DrograspError(f"--set expects KEY=VALUE, got {item!r}")
+        try:
+            out[key.strip()] = json.loads(value)
+        except json.JSONDecodeError:
+            out[key.strip()] = value
+        if isinstance(out[key.strip()], list):
+            out[key.strip()] = tuple(out[key.strip()])
+    return out
+
+
+def _load_rows(path: Path, limit: int | None) -> dict[str, np.ndarray]:
+    if not path.is_file():
+        raise GraspError(f"{path}: no such grasps file")
+    try:
+        with np.load(path, allow_pickle=False) as npz:
+            rows = {k: npz[k] for k in npz.files}
+    except ValueError as err:
+        raise GraspError(f"{path}: not a readable NPZ without pickle ({err})") from None
+    missing = [k for k in LAYOUT_KEYS if k not in rows]
+    if missing:
+        raise GraspError(f"{path}: missing arrays {missing} of DexGraspBench's layout")
+    n = len(rows["grasp_qpos"]) if limit is None else min(limit, len(rows["grasp_qpos"]))
+    return {k: v[:n] if v.ndim and len(v) >= n else v for k, v in rows.items()}
+
+
+def _hand(args: argparse.Namespace) -> tuple[HandAdapter, tuple[str, ...], dict[str, str]]:
+    if args.hand:
+        adapter = project_hand(args.hand)
+        return adapter, adapter.joint_names, {}
+    joint_map = json.loads(args.joint_map.read_text()) if args.joint_map else {}
+    xml_joints = mjcf_joint_names(str(args.hand_xml.resolve())) if args.hand_xml.is_file() else ()
+    adapter = mjcf_hand(args.hand_xml, joint_map)
+    return adapter, xml_joints, joint_map
+
+
+def _summary(rows: dict[str, np.ndarray], results: list, wall: float, preset: str) -> dict:
+    ok = np.array([r.success for r in results], dtype=bool)
+    tested = [r for r in results if r.directions]
+    summary: dict[str, Any] = {
+        "grasps": len(results),
+        "preset": preset,
+        "success_rate": float(ok.mean()) if len(ok) else 0.0,
+        "successes": int(ok.sum()),
+        "pregrasp_penetration_failures": sum(r.reason == "pregrasp_penetration" for r in results),
+        "mean_translation_m": float(np.mean([r.translation for r in tested])) if tested else None,
+        "mean_rotation_deg": float(np.mean([r.rotation_deg for r in tested])) if tested else None,
+        "mean_wall_time_s": float(np.mean([r.wall_time for r in results])) if results else 0.0,
+        "total_wall_time_s": wall,
+    }
+    if "reference_success" in rows:
+        ref = rows["reference_success"].astype(bool)[: len(ok)]
+        summary["reference_success_rate"] = float(ref.mean())
+        summary["agreement"] = float((ref == ok).mean())
+        summary["agree"] = int((ref == ok).sum())
+        summary["false_success"] = int((ok & ~ref).sum())
+        summary["false_failure"] = int((~ok & ref).sum())
+    return summary
+
+
+def run(args: argparse.Namespace) -> int:
+    protocol = get_protocol(args.preset, **_overrides(args.set))
+    rows = _load_rows(args.file, args.limit)
+    adapter, xml_joints, joint_map = _hand(args)
+    n = len(rows["grasp_qpos"])
+    grasps: list[Grasp] = []
+    objects = []
+    for i in range(n):
+        grasps.append(
+            from_dexgraspbench(
+                rows["pregrasp_qpos"][i],
+                rows["grasp_qpos"][i],
+                rows["squeeze_qpos"][i],
+                hand=adapter.name,
+                joint_names=adapter.joint_names,
+                xml_joint_names=xml_joints,
+                joint_map=joint_map,
+            )
+        )
+        objects.append(find_object(args.objects, str(rows["object"][i]), float(rows["scale"][i])))
+    poses = rows.get("obj_pose")
+    start = time.perf_counter()
+    results = validate_many(
+        grasps,
+        objects,
+        adapter,
+        protocol,
+        object_poses=None if poses is None else list(poses),
+        workers=args.workers,
+        all_directions=args.all_directions or None,
+        progress=True,
+    )
+    summary = _summary(rows, results, time.perf_counter() - start, args.preset)
+    if args.out:
+        per_grasp = []
+        for i, r in enumerate(results):
+            entry = {"index": i, "object": str(rows["object"][i]), "scale": float(rows["scale"][i])}
+            if "reference_success" in rows:
+                entry["reference_success"] = bool(rows["reference_success"][i])
+            per_grasp.append(entry | r.to_dict())
+        args.out.write_text(json.dumps({"summary": summary, "grasps": per_grasp}, indent=1))
+    if args.json:
+        print(json.dumps(summary, indent=1))
+    else:
+        print(
+            f"{summary['grasps']} grasps, preset {args.preset}: success "
+            f"{summary['success_rate']:.1%} ({summary['successes']}); mean displacement "
+            f"{(summary['mean_translation_m'] or 0) * 100:.2f} cm, "
+            f"{summary['mean_rotation_deg'] or 0:.2f} deg; "
+            f"{summary['mean_wall_time_s']:.2f} s per grasp"
+        )
+        if "agreement" in summary:
+            print(
+                f"agreement with reference_success: {summary['agreement']:.1%} "
+                f"({summary['agree']}/{summary['grasps']}; reference success "
+                f"{summary['reference_success_rate']:.1%}; {summary['false_success']} false "
+                f"successes, {summary['false_failure']} false failures)"
+            )
+    return 0
