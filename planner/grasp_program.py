@@ -1,0 +1,292 @@
+"""The Drake grasp program: coarse interaction elements -> exact, collision-free joint values.
+
+A MultibodyPlant holds the hand (floating wrist, hand-hand collisions filtered) and the object
+as anchored convex pieces. One nonlinear program (Drake InverseKinematics, solved by SNOPT)
+takes weighted costs (anchor fingertips to anchor points, hand surface points to target
+positions, a wrist prior) subject to a minimum hand-object signed distance and joint limits.
+SNOPT often reports failure at the optimum with many convex pieces, so every answer is checked
+directly (penetration, anchor error) and the flag is only recorded.
+
+Built diagrams are cached per (hand, object): building costs 10-60 ms, a solve 20-150 ms.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from pydrake.common.eigen_geometry import Quaternion
+from pydrake.geometry import Convex, SceneGraph
+from pydrake.math import RigidTransform, RotationMatrix
+from pydrake.multibody.inverse_kinematics import InverseKinematics
+from pydrake.multibody.plant import AddMultibodyPlantSceneGraph, CoulombFriction
+from pydrake.solvers import SnoptSolver, SolverOptions
+from pydrake.systems.framework import DiagramBuilder
+
+from models.errors import PlanningError
+from models.hands import HandModel
+from planner.validation.objects import CollisionObject, as_collision_object
+
+
+@dataclass(frozen=True)
+class ProgramSettings:
+    """Weights and solver caps. Defaults follow the measurements in DESIGN.md."""
+
+    anchor_weight: float = 100.0
+    point_weight: float = 10.0
+    wrist_position_weight: float = 1.0
+    wrist_rotation_weight: float = 0.01
+    joint_prior_weight: float = 1e-4
+    min_distance: float = 0.0005  # hand-object signed distance lower bound (m): about touching
+    influence_distance: float = 0.02
+    penetration_tolerance: float = 0.002  # accepted penetration when checking an answer (m)
+    anchor_tolerance: float = 0.01  # accepted fingertip-surface to anchor distance (m)
+    major_optimality: float = 1e-3
+    major_feasibility: float = 1e-5
+    major_iterations: int = 150
+
+
+@dataclass
+class SolveResult:
+    """One solve, checked directly: `ok` means no penetration beyond the tolerance and every
+    anchor reached; `solver_success` is SNOPT's own flag, recorded but not trusted."""
+
+    wrist: np.ndarray  # [x, y, z, qw, qx, qy, qz]
+    q: np.ndarray
+    ok: bool
+    min_distance: float  # smallest hand-object signed distance (negative: penetration)
+    anchor_error: float  # worst |fingertip surface - anchor| (m); 0 without anchors
+    solver_success: bool
+    solver_status: str
+    solve_time: float
+    message: str = ""
+
+
+@dataclass
+class GraspTargets:
+    """What the program should achieve. Any part may be absent.
+
+    anchors: (4, 3) object surface points for the hand's anchor fingers (hand.json order);
+    anchor_normals: (4, 3) outward normals there, so the fingertip sphere rests on the point;
+    point_targets: (P, 3) world targets for hand surface points `point_index` (indices into
+    the 512 fixed points), e.g. from multilateration of a predicted D(R,O)."""
+
+    wrist: np.ndarray
+    q: np.ndarray
+    anchors: np.ndarray | None = None
+    anchor_normals: np.ndarray | None = None
+    point_index: np.ndarray | None = None
+    point_targets: np.ndarray | None = None
+    fix_wrist: bool = False
+
+
+def _normalize_wrist(wrist: np.ndarray) -> np.ndarray:
+    wrist = np.asarray(wrist, dtype=float).copy()
+    wrist[3:7] /= np.linalg.norm(wrist[3:7])
+    return wrist
+
+
+def _pose(wrist: np.ndarray) -> RigidTransform:
+    return RigidTransform(Quaternion(wrist[3:7] / np.linalg.norm(wrist[3:7])), wrist[:3])
+
+
+@dataclass
+class GraspProgram:
+    """The built diagram for one (hand, object); `solve` runs one program."""
+
+    hand: HandModel
+    obj: CollisionObject
+    settings: ProgramSettings = field(default_factory=ProgramSettings)
+
+    def __post_init__(self) -> None:
+        builder = DiagramBuilder()
+        plant, scene_graph = AddMultibodyPlantSceneGraph(builder, 0.0)
+        self.handle = self.hand.add_to_plant(plant, scene_graph, filter_self_collisions=True)
+        world = plant.world_body()
+        for i, piece in enumerate(self.obj.pieces):
+            plant.RegisterCollisionGeometry(
+                world,
+                RigidTransform(),
+                Convex(np.asarray(piece.vertices, dtype=float).T, f"{self.obj.name}_{i}"),
+                f"object_piece_{i}",
+                CoulombFriction(0.6, 0.6),
+            )
+        plant.Finalize()
+        self.plant: object = plant
+        self.scene_graph: SceneGraph = scene_graph
+        self.diagram = builder.Build()
+        self.context = self.diagram.CreateDefaultContext()
+        self.plant_context = plant.GetMyMutableContextFromRoot(self.context)
+        self.tips = [self.hand.meta.fingertip(n) for n in self.hand.meta.anchor_fingers]
+        self.tip_frames = [
+            plant.GetBodyByName(t.link, self.handle.instance).body_frame() for t in self.tips
+        ]
+        self.root_frame = plant.GetBodyByName(
+            self.hand.root_link, self.handle.instance
+        ).body_frame()
+        link_idx, local = self.hand.surface
+        self.point_frames = [
+            plant.GetBodyByName(self.hand.link_names[i], self.handle.instance).body_frame()
+            for i in link_idx
+        ]
+        self.point_local = local
+        inspector = scene_graph.model_inspector()
+        root_body = plant.GetBodyByName(self.hand.root_link, self.handle.instance)
+        self._palm_geoms = set(plant.GetCollisionGeometriesForBody(root_body))
+        self._hand_geoms = set(self.handle.geometry_ids)
+        self._inspector = inspector
+        self._solver = SnoptSolver()
+        if not self._solver.available():
+            raise PlanningError(
+                "SNOPT is not available in this Drake build; install drake from PyPI"
+            )
+
+    # ---- evaluation -----------------------------------------------------------------------
+    def set_configuration(self, wrist: np.ndarray, q: np.ndarray) -> None:
+        self.handle.set_state(self.plant, self.plant_context, _normalize_wrist(wrist), q)
+
+    def hand_object_distance(
+        self, wrist: np.ndarray, q: np.ndarray, fingers_only: bool = False, horizon: float = 0.1
+    ) -> float:
+        """Smallest signed distance between the hand (or its non-palm links) and the object."""
+        self.set_configuration(wrist, q)
+        query = self.plant.get_geometry_query_input_port().Eval(self.plant_context)
+        best = horizon
+        for pair in query.ComputeSignedDistancePairwiseClosestPoints(horizon):
+            a, b = pair.id_A, pair.id_B
+            hand_geom = a if a in self._hand_geoms else b
+            if (a in self._hand_geoms) == (b in self._hand_geoms):
+                continue
+            if fingers_only and hand_geom in self._palm_geoms:
+                continue
+            best = min(best, pair.distance)
+        return float(best)
+
+    def anchor_error(self, wrist: np.ndarray, q: np.ndarray, anchors: np.ndarray) -> float:
+        self.set_configuration(wrist, q)
+        worst = 0.0
+        for tip, frame, anchor in zip(self.tips, self.tip_frames, anchors, strict=True):
+            centre = self.plant.CalcPointsPositions(
+                self.plant_context, frame, tip.point[:, None], self.plant.world_frame()
+            )[:, 0]
+            worst = max(worst, abs(np.linalg.norm(centre - anchor) - tip.radius))
+        return worst
+
+    # ---- the program ----------------------------------------------------------------------
+    def solve(self, targets: GraspTargets) -> SolveResult:
+        s = self.settings
+        start = time.perf_counter()
+        wrist0 = _normalize_wrist(targets.wrist)
+        q0 = np.clip(np.asarray(targets.q, dtype=float), self.hand.lower, self.hand.upper)
+        self.hand.check_joints(q0, "initial joints")
+        plant, world = self.plant, self.plant.world_frame()
+        ik = InverseKinematics(plant, self.plant_context, with_joint_limits=True)
+        prog, qvar = ik.prog(), ik.q()
+        x0 = self.handle.positions(plant, wrist0, q0)
+        joints = self.handle.joint_position_index
+        if targets.anchors is not None:
+            anchors = np.asarray(targets.anchors, dtype=float)
+            centres = anchors.copy()
+            if targets.anchor_normals is not None:
+                normals = np.asarray(targets.anchor_normals, dtype=float)
+                normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+                radii = np.array([t.radius for t in self.tips])[:, None]
+                centres = anchors + normals * (radii + s.min_distance)
+            for tip, frame, centre in zip(self.tips, self.tip_frames, centres, strict=True):
+                ik.AddPositionCost(world, centre, frame, tip.point, s.anchor_weight * np.eye(3))
+        if targets.point_targets is not None:
+            for i, target in zip(targets.point_index, targets.point_targets, strict=True):
+                ik.AddPositionCost(
+                    world,
+                    target,
+                    self.point_frames[i],
+                    self.point_local[i],
+                    s.point_weight * np.eye(3),
+                )
+        start_wrist = self.handle.root_body.floating_positions_start()
+        wrist_vars = qvar[start_wrist : start_wrist + 7]
+        if targets.fix_wrist:
+            prog.AddBoundingBoxConstraint(
+                x0[start_wrist : start_wrist + 7], x0[start_wrist : start_wrist + 7], wrist_vars
+            )
+        else:
+            ik.AddPositionCost(
+                world, wrist0[:3], self.root_frame, np.zeros(3), s.wrist_position_weight * np.eye(3)
+            )
+            ik.AddOrientationCost(
+                world,
+                RotationMatrix(Quaternion(wrist0[3:7])),
+                self.root_frame,
+                RotationMatrix(),
+                s.wrist_rotation_weight,
+            )
+        prog.AddQuadraticErrorCost(s.joint_prior_weight * np.eye(len(joints)), q0, qvar[joints])
+        ik.AddMinimumDistanceLowerBoundConstraint(s.min_distance, s.influence_distance)
+        options = SolverOptions()
+        sid = self._solver.solver_id()
+        options.SetOption(sid, "Major optimality tolerance", s.major_optimality)
+        options.SetOption(sid, "Major feasibility tolerance", s.major_feasibility)
+        options.SetOption(sid, "Major iterations limit", s.major_iterations)
+        result = self._solver.Solve(prog, x0, options)
+        x = result.GetSolution(qvar)
+        wrist = np.concatenate(
+            [x[start_wrist + 4 : start_wrist + 7], x[start_wrist : start_wrist + 4]]
+        )
+        wrist = _normalize_wrist(wrist)
+        q = np.clip(x[joints], self.hand.lower, self.hand.upper)
+        distance = self.hand_object_distance(wrist, q)
+        anchor_err = (
+            0.0
+            if targets.anchors is None
+            else self.anchor_error(wrist, q, np.asarray(targets.anchors))
+        )
+        problems = []
+        if distance < -s.penetration_tolerance:
+            problems.append(f"penetration {-distance * 1000:.1f} mm")
+        if anchor_err > s.anchor_tolerance:
+            problems.append(f"anchor error {anchor_err * 1000:.1f} mm")
+        return SolveResult(
+            wrist=wrist,
+            q=q,
+            ok=not problems,
+            min_distance=distance,
+            anchor_error=anchor_err,
+            solver_success=result.is_success(),
+            solver_status=str(result.get_solution_result()).split(".")[-1],
+            solve_time=time.perf_counter() - start,
+            message="; ".join(problems),
+        )
+
+    # ---- pregrasp and squeeze -------------------------------------------------------------
+    def pregrasp(
+        self, wrist: np.ndarray, q: np.ndarray, clearance: float = 0.01, steps: int = 20
+    ) -> np.ndarray:
+        """Joints on the way from the grasp to the open pose where the fingers first clear the
+        object by `clearance` (BODex's pregrasp: contacts about 1 cm off), same wrist."""
+        open_q = self.hand.open_pose
+        for alpha in np.linspace(0, 1, steps + 1)[1:]:
+            candidate = q + alpha * (open_q - q)
+            if self.hand_object_distance(wrist, candidate, fingers_only=True) >= clearance:
+                return candidate
+        return open_q.copy()
+
+    def squeeze(self, q: np.ndarray, pregrasp: np.ndarray) -> np.ndarray:
+        """BODex's rule: squeeze = 2 x grasp - pregrasp, within joint limits."""
+        return np.clip(2 * q - pregrasp, self.hand.lower, self.hand.upper)
+
+
+_PROGRAMS: dict[tuple, GraspProgram] = {}
+_MAX_PROGRAMS = 16
+
+
+def grasp_program(hand: HandModel, obj, settings: ProgramSettings | None = None) -> GraspProgram:
+    """The cached program for (hand, object, settings): built once, reused by every solve."""
+    obj = as_collision_object(obj)
+    settings = settings or ProgramSettings()
+    key = (str(hand.folder), obj.key, settings)
+    if key not in _PROGRAMS:
+        if len(_PROGRAMS) >= _MAX_PROGRAMS:
+            _PROGRAMS.pop(next(iter(_PROGRAMS)))
+        _PROGRAMS[key] = GraspProgram(hand, obj, settings)
+    return _PROGRAMS[key]
