@@ -1,0 +1,160 @@
+"""ObjectModel: one graspable object, from a mesh or a point cloud, with everything derived from it.
+
+Surface samples, normals, random and farthest-point clouds and collision pieces are computed on
+first use and kept, so loading is cheap and a planner asks only for what it needs.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import trimesh
+
+from . import collision, surface
+
+DENSE_POINTS = 16384
+
+
+@dataclass
+class Samples:
+    """Points on the object's surface with outward unit normals and part labels (or None)."""
+
+    points: np.ndarray  # (n, 3) metres
+    normals: np.ndarray  # (n, 3)
+    labels: np.ndarray | None  # (n,) index into ObjectModel.part_names
+    index: np.ndarray | None = None  # (n,) rows of ObjectModel.points, where drawn from them
+
+    def __len__(self) -> int:
+        return len(self.points)
+
+
+@dataclass(eq=False)
+class ObjectModel:
+    """An object in metres. Exactly one of `mesh` and `cloud` is the source geometry.
+
+    Generated objects (see `make_object`) are upright (+z up, long tools along x) with the
+    bounding box centred at the origin; loaded objects keep the caller's frame.
+    """
+
+    name: str
+    mesh: trimesh.Trimesh | None = None
+    cloud: np.ndarray | None = None  # (N, 3) when loaded from a point cloud
+    cloud_normals: np.ndarray | None = None  # given with the cloud, else estimated on demand
+    cloud_labels: np.ndarray | None = None  # (N,) part label per cloud point, if known
+    face_labels: np.ndarray | None = None  # (F,) part label per mesh face, if known
+    part_names: tuple[str, ...] = ()
+    category: str | None = None
+    seed: int | None = None
+    source: str | None = None  # file path, or None for arrays and generated objects
+    viewpoint: np.ndarray | None = None  # camera position of a single-view cloud
+    construction_pieces: list[np.ndarray] | None = None  # convex point sets known by construction
+    _derived: dict = field(default_factory=dict, repr=False)
+
+    # ---- surface -------------------------------------------------------------------------
+    @property
+    def is_cloud(self) -> bool:
+        return self.mesh is None
+
+    @property
+    def labelled(self) -> bool:
+        return bool(self.part_names) and (
+            self.face_labels is not None if self.mesh is not None else self.cloud_labels is not None
+        )
+
+    def _surface(self) -> Samples:
+        if "surface" not in self._derived:
+            if self.mesh is not None:
+                labels = self.face_labels if self.labelled else None
+                pts, nrm, lab = surface.sample_mesh(self.mesh, DENSE_POINTS, 0, labels)
+            else:
+                pts = self.cloud
+                nrm = self.cloud_normals
+                if nrm is None:
+                    nrm = surface.estimate_normals(pts, viewpoint=self.viewpoint)
+                lab = self.cloud_labels if self.labelled else None
+            self._derived["surface"] = Samples(pts, nrm, lab, np.arange(len(pts)))
+        return self._derived["surface"]
+
+    @property
+    def points(self) -> np.ndarray:
+        """Dense surface points: 16384 area-weighted samples of a mesh, or the cloud itself."""
+        return self._surface().points
+
+    @property
+    def normals(self) -> np.ndarray:
+        """Outward unit normals at `points` (estimated and oriented for a bare cloud)."""
+        return self._surface().normals
+
+    @property
+    def point_labels(self) -> np.ndarray | None:
+        """Part label of each of `points` (index into part_names), or None when unlabelled."""
+        return self._surface().labels
+
+    @property
+    def extents(self) -> np.ndarray:
+        src = self.mesh.vertices if self.mesh is not None else self.cloud
+        return np.ptp(src, axis=0)
+
+    def part_of(self, label: int) -> str:
+        return self.part_names[label]
+
+    def sample_cloud(self, n: int = 2048, seed: int = 0) -> Samples:
+        """A random n-point cloud: fresh area-weighted samples of a mesh, a subset of a cloud.
+
+        A cloud with fewer than n points is drawn with replacement.
+        """
+        if self.mesh is not None:
+            labels = self.face_labels if self.labelled else None
+            pts, nrm, lab = surface.sample_mesh(self.mesh, n, seed + 1, labels)
+            return Samples(pts, nrm, lab)
+        base = self._surface()
+        rng = np.random.default_rng(seed)
+        idx = rng.choice(len(base), size=n, replace=n > len(base))
+        return Samples(
+            base.points[idx],
+            base.normals[idx],
+            None if base.labels is None else base.labels[idx],
+            idx,
+        )
+
+    def fps(self, n: int = 512) -> Samples:
+        """n farthest-point samples of `points` (deterministic; cached per n)."""
+        key = f"fps{n}"
+        if key not in self._derived:
+            base = self._surface()
+            idx = surface.farthest_point_indices(base.points, n)
+            lab = None if base.labels is None else base.labels[idx]
+            self._derived[key] = Samples(base.points[idx], base.normals[idx], lab, idx)
+        return self._derived[key]
+
+    # ---- collision -----------------------------------------------------------------------
+    def collision_pieces(self, method: str = "auto") -> list[trimesh.Trimesh]:
+        """Convex hulls covering the object, for Drake `Convex` and MuJoCo mesh geoms.
+
+        method: "auto" (construction pieces for generated objects, CoACD for meshes, cloud pieces
+        for clouds), "construction", "coacd" (cached on disk) or "cloud" (from surface points).
+        """
+        if method == "auto":
+            if self.construction_pieces is not None:
+                method = "construction"
+            else:
+                method = "coacd" if self.mesh is not None else "cloud"
+        key = f"pieces-{method}"
+        if key not in self._derived:
+            if method == "construction":
+                if self.construction_pieces is None:
+                    raise ValueError(
+                        "this object has no construction pieces; use 'coacd' or 'cloud'"
+                    )
+                pieces = collision.hulls(self.construction_pieces)
+            elif method == "coacd":
+                if self.mesh is None:
+                    raise ValueError("CoACD needs a mesh; a bare cloud uses method='cloud'")
+                pieces = collision.coacd_pieces(self.mesh)
+            elif method == "cloud":
+                pieces = collision.cloud_pieces(self.points, self.normals)
+            else:
+                raise ValueError(f"unknown method {method!r}: auto, construction, coacd or cloud")
+            self._derived[key] = pieces
+        return self._derived[key]
