@@ -1,0 +1,78 @@
+"""Wall time per grasp of the MuJoCo validator on one core, on DexGraspBench's reference grasps.
+
+Prints the median over a sample of grasps for: the shared closing phase (simulated once, copied
+per direction) and DexGraspBench's way (closing re-simulated per direction), and their ratio.
+Scenes are compiled before timing (a real run compiles each (hand, object) once).
+
+    /work/venv/bin/python benchmarks/bench_validation.py [--grasps 40] [--preset dexgraspbench]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+
+from models.grasp import from_dexgraspbench
+from planner.validation import find_object, get_protocol, mjcf_hand, validate
+from planner.validation.hands import mjcf_joint_names
+
+BENCH = Path(__file__).resolve().parents[1].parent / "shared" / "reference" / "dexgraspbench"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--grasps", type=int, default=40, help="grasps sampled evenly from 200")
+    parser.add_argument("--preset", default="dexgraspbench")
+    args = parser.parse_args()
+    os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})  # one core
+
+    xml = BENCH / "hand" / "shadow_right_hand.xml"
+    hand = mjcf_hand(xml)
+    xml_joints = mjcf_joint_names(str(xml.resolve()))
+    with np.load(BENCH / "grasps.npz", allow_pickle=False) as npz:
+        rows = {k: npz[k] for k in npz.files}
+    idx = np.linspace(0, len(rows["grasp_qpos"]) - 1, args.grasps).round().astype(int)
+    cases = []
+    for i in idx:
+        grasp = from_dexgraspbench(
+            rows["pregrasp_qpos"][i],
+            rows["grasp_qpos"][i],
+            rows["squeeze_qpos"][i],
+            hand=hand.name,
+            joint_names=hand.joint_names,
+            xml_joint_names=xml_joints,
+        )
+        obj = find_object(BENCH / "objects", str(rows["object"][i]), float(rows["scale"][i]))
+        cases.append((grasp, obj, rows["obj_pose"][i]))
+
+    shared = get_protocol(args.preset)
+    separate = shared.replace(share_closing=False)
+    for grasp, obj, pose in cases:  # compile every scene first
+        validate(grasp, obj, hand, get_protocol(args.preset, hold_time=0.2), object_pose=pose)
+
+    timings = {}
+    verdicts = {}
+    for label, proto in (("shared closing", shared), ("DexGraspBench way", separate)):
+        times, ok = [], []
+        for grasp, obj, pose in cases:
+            start = time.perf_counter()
+            result = validate(grasp, obj, hand, proto, object_pose=pose)
+            times.append(time.perf_counter() - start)
+            ok.append(result.success)
+        timings[label], verdicts[label] = np.array(times), ok
+        print(
+            f"{label:18s}: median {np.median(times):.3f} s/grasp, mean {np.mean(times):.3f} s "
+            f"({len(cases)} grasps, {np.mean(ok):.0%} held, preset {args.preset}, one core)"
+        )
+    assert verdicts["shared closing"] == verdicts["DexGraspBench way"]
+    ratio = np.median(timings["DexGraspBench way"]) / np.median(timings["shared closing"])
+    total = timings["DexGraspBench way"].sum() / timings["shared closing"].sum()
+    print(f"speed-up (DexGraspBench way / shared closing): median {ratio:.2f}x, total {total:.2f}x")
+
+
+if __name__ == "__main__":
+    main()
