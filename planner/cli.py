@@ -14,7 +14,7 @@ import sys
 from models.errors import DrograspError
 
 # Order is the order shown in `drograsp --help`.
-COMMANDS: tuple[str, ...] = ("hands",)
+COMMANDS: tuple[str, ...] = ("demo", "plan", "view", "validate", "hands", "objects")
 
 
 def build_parser() -> argparse.ArgumentParser:

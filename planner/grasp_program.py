@@ -21,6 +21,7 @@ from pydrake.geometry import Convex, SceneGraph
 from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.multibody.inverse_kinematics import InverseKinematics
 from pydrake.multibody.plant import AddMultibodyPlantSceneGraph, CoulombFriction
+from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.solvers import SnoptSolver, SolverOptions
 from pydrake.systems.framework import DiagramBuilder
 
@@ -34,6 +35,7 @@ class ProgramSettings:
     """Weights and solver caps. Defaults follow the measurements in DESIGN.md."""
 
     anchor_weight: float = 100.0
+    palm_weight: float = 20.0
     point_weight: float = 10.0
     wrist_position_weight: float = 1.0
     wrist_rotation_weight: float = 0.01
@@ -78,6 +80,7 @@ class GraspTargets:
     anchor_normals: np.ndarray | None = None
     point_index: np.ndarray | None = None
     point_targets: np.ndarray | None = None
+    palm_target: np.ndarray | None = None  # where the palm centre should rest (enclosing grasps)
     fix_wrist: bool = False
 
 
@@ -102,7 +105,7 @@ class GraspProgram:
     def __post_init__(self) -> None:
         builder = DiagramBuilder()
         plant, scene_graph = AddMultibodyPlantSceneGraph(builder, 0.0)
-        self.handle = self.hand.add_to_plant(plant, scene_graph, filter_self_collisions=True)
+        self.handle = self.hand.add_to_plant(plant, scene_graph, filter_self_collisions=False)
         world = plant.world_body()
         for i, piece in enumerate(self.obj.pieces):
             plant.RegisterCollisionGeometry(
@@ -195,6 +198,14 @@ class GraspProgram:
                 centres = anchors + normals * (radii + s.min_distance)
             for tip, frame, centre in zip(self.tips, self.tip_frames, centres, strict=True):
                 ik.AddPositionCost(world, centre, frame, tip.point, s.anchor_weight * np.eye(3))
+        if targets.palm_target is not None:
+            ik.AddPositionCost(
+                world,
+                np.asarray(targets.palm_target, dtype=float),
+                self.root_frame,
+                self.hand.meta.palm.center,
+                s.palm_weight * np.eye(3),
+            )
         if targets.point_targets is not None:
             for i, target in zip(targets.point_index, targets.point_targets, strict=True):
                 ik.AddPositionCost(
@@ -260,12 +271,45 @@ class GraspProgram:
 
     # ---- pregrasp and squeeze -------------------------------------------------------------
     def pregrasp(
-        self, wrist: np.ndarray, q: np.ndarray, clearance: float = 0.01, steps: int = 20
+        self,
+        wrist: np.ndarray,
+        q: np.ndarray,
+        tip_normals: np.ndarray | None = None,
+        clearance: float = 0.01,
     ) -> np.ndarray:
-        """Joints on the way from the grasp to the open pose where the fingers first clear the
-        object by `clearance` (BODex's pregrasp: contacts about 1 cm off), same wrist."""
+        """BODex's pregrasp: the grasp with contacts about `clearance` off the surface, same
+        wrist. With the object's outward normals at the anchor fingertips, each finger's joints
+        move its tip back along its normal (damped least squares on the fingertip Jacobian), so
+        the squeeze (2 x grasp - pregrasp) then presses along the normals instead of sliding
+        the object away; the other joints move toward the open pose by the same fraction."""
+        q = np.asarray(q, dtype=float)
+        if tip_normals is None:
+            return self._pregrasp_toward_open(wrist, q, clearance)
+        self.set_configuration(wrist, q)
+        plant, world = self.plant, self.plant.world_frame()
+        joints = self.handle.joint_velocity_index
+        delta = np.zeros(self.hand.dof)
+        moved = np.zeros(self.hand.dof, dtype=bool)
+        for tip, frame, normal in zip(self.tips, self.tip_frames, tip_normals, strict=True):
+            jac = plant.CalcJacobianTranslationalVelocity(
+                self.plant_context, JacobianWrtVariable.kV, frame, tip.point, world, world
+            )[:, joints]
+            cols = np.flatnonzero(np.abs(jac).sum(axis=0) > 1e-9)
+            cols = cols[~moved[cols]]  # joints shared with an earlier finger stay put
+            j = jac[:, cols]
+            step = j.T @ np.linalg.solve(j @ j.T + 1e-4 * np.eye(3), normal * clearance)
+            delta[cols] += step
+            moved[cols] = True
+        rest = ~moved
+        delta[rest] = 0.3 * (self.hand.open_pose[rest] - q[rest])
+        return np.clip(q + delta, self.hand.lower, self.hand.upper)
+
+    def _pregrasp_toward_open(
+        self, wrist: np.ndarray, q: np.ndarray, clearance: float
+    ) -> np.ndarray:
+        """Joints on the way to the open pose where the fingers first clear the object."""
         open_q = self.hand.open_pose
-        for alpha in np.linspace(0, 1, steps + 1)[1:]:
+        for alpha in np.linspace(0, 1, 21)[1:]:
             candidate = q + alpha * (open_q - q)
             if self.hand_object_distance(wrist, candidate, fingers_only=True) >= clearance:
                 return candidate

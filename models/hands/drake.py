@@ -78,6 +78,13 @@ class _LazyDrakeHand(DrakeHand):
         self._index = None
 
     @property
+    def joint_velocity_index(self) -> np.ndarray:
+        """v index in the plant of each joint, in hand joint order."""
+        return np.array(
+            [self._plant.GetJointByName(n, self.instance).velocity_start() for n in self._names]
+        )
+
+    @property
     def joint_position_index(self) -> np.ndarray:  # type: ignore[override]
         if self._index is None:
             self._index = np.array(

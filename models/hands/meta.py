@@ -64,6 +64,9 @@ class HandMeta:
     kv: float
     force_range: float
     ignore_collision_pairs: tuple[tuple[str, str], ...]
+    joint_damping: float  # simulation joint dynamics (vendor values; URDF cannot hold armature)
+    joint_armature: float
+    joint_frictionloss: float
     source: str  # where the kinematics come from (for provenance and vendor checks)
 
     def fingertip(self, name: str) -> Fingertip:
@@ -135,5 +138,8 @@ def read_meta(path: Path) -> HandMeta:
         kv=float(act.get("kv", 0.0)),
         force_range=float(act.get("force_range", 0.0)),
         ignore_collision_pairs=tuple(tuple(p) for p in raw["ignore_collision_pairs"]),
+        joint_damping=float(raw.get("joint_dynamics", {}).get("damping", 0.0)),
+        joint_armature=float(raw.get("joint_dynamics", {}).get("armature", 0.0)),
+        joint_frictionloss=float(raw.get("joint_dynamics", {}).get("frictionloss", 0.0)),
         source=raw.get("source", ""),
     )

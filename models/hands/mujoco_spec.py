@@ -18,7 +18,8 @@ def actuator_name(joint: str) -> str:
 def hand_spec(hand) -> mujoco.MjSpec:
     """A fresh spec: mocap body `wrist_mocap`, root body with free joint `wrist_free` welded
     to it (`wrist_weld`), one position actuator `<joint>_act` per joint (kp from hand.json,
-    ctrlrange = joint limits), and the hand.json contact exclusions."""
+    ctrlrange = joint limits), joint damping/armature/friction loss from hand.json, and the
+    hand.json contact exclusions."""
     spec = mujoco.MjSpec.from_file(str(hand.urdf_path))
     spec.compiler.fusestatic = False
     root = spec.body(hand.root_link)
@@ -32,6 +33,11 @@ def hand_spec(hand) -> mujoco.MjSpec:
         name2=WRIST_MOCAP,
     )
     meta = hand.meta
+    for joint in hand.joint_names:
+        spec_joint = spec.joint(joint)
+        spec_joint.damping[0] = meta.joint_damping  # MuJoCo 4: [linear, ...] coefficients
+        spec_joint.armature = meta.joint_armature
+        spec_joint.frictionloss = meta.joint_frictionloss
     for joint, lo, hi in zip(hand.joint_names, hand.lower, hand.upper, strict=True):
         act = spec.add_actuator(
             name=actuator_name(joint), target=joint, trntype=mujoco.mjtTrn.mjTRN_JOINT

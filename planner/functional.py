@@ -1,0 +1,333 @@
+"""The model-based functional planner: part-labelled object + instruction -> validated grasp.
+
+Until the learned priors exist this is how a wrist pose and anchors are proposed: the
+instructed part's points are analysed (principal axes), the thumb is put on one side of the
+part and the three other anchor fingers on the opposite side, spread along the part's long
+axis at the hand's own finger spacing, and the palm faces the part from the side with the
+most free space. Each proposal goes through the Drake grasp program and MuJoCo validation;
+the first grasp that holds and touches the instructed part is returned with every candidate's
+outcome.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from functools import cached_property
+from typing import Any
+
+import numpy as np
+import torch
+from scipy.spatial import cKDTree
+from scipy.spatial.transform import Rotation
+
+from models.errors import InstructionError, PlanningError
+from models.grasp import Grasp
+from models.hands import HandModel, load_hand
+from models.objects import Instruction, ObjectModel, load_object, parse_instruction
+from planner.grasp_program import GraspTargets, ProgramSettings, SolveResult, grasp_program
+from planner.labels import nearest_points, voted_part
+from planner.validation import validate
+
+
+@dataclass(frozen=True)
+class PlannerSettings:
+    max_candidates: int = 8
+    protocol: str = "paper"
+    approach_clearance: float = 0.06  # m from the anchors' centre to test the palm's free space
+    palm_margin: float = 0.004  # m between the palm target and the part's near surface
+    use_palm: bool = True
+    program: ProgramSettings = field(default_factory=ProgramSettings)
+
+
+@dataclass
+class Proposal:
+    wrist: np.ndarray  # [x, y, z, qw, qx, qy, qz]
+    q: np.ndarray
+    anchors: np.ndarray  # (4, 3) in anchor-finger order
+    normals: np.ndarray  # (4, 3)
+    score: float
+    palm_target: np.ndarray | None = None
+
+
+@dataclass
+class CandidateResult:
+    rank: int
+    proposal: Proposal
+    solve: SolveResult
+    grasp: Grasp | None = None
+    success: bool = False
+    part: str | None = None
+    validation: dict[str, Any] | None = None
+    times: dict[str, float] = field(default_factory=dict)
+
+    def summary(self) -> dict[str, Any]:
+        return {
+            "rank": self.rank,
+            "solved": self.solve.ok,
+            "solve_message": self.solve.message,
+            "success": self.success,
+            "part": self.part,
+            "anchor_error_mm": 1000 * self.solve.anchor_error,
+            "min_distance_mm": 1000 * self.solve.min_distance,
+            "times": self.times,
+        }
+
+
+@dataclass
+class PlanResult:
+    instruction: Instruction
+    hand: str
+    grasp: Grasp | None
+    candidates: list[CandidateResult]
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def best(self) -> CandidateResult | None:
+        return next((c for c in self.candidates if c.grasp is self.grasp), None)
+
+    @property
+    def success(self) -> bool:
+        return self.best is not None and self.best.success
+
+    @property
+    def part_touched(self) -> str | None:
+        return None if self.best is None else self.best.part
+
+    def stage_times(self) -> dict[str, float]:
+        total: dict[str, float] = {}
+        for c in self.candidates:
+            for k, v in c.times.items():
+                total[k] = total.get(k, 0.0) + v
+        return total
+
+    def summary(self) -> dict[str, Any]:
+        best = self.best
+        return {
+            "instruction": self.instruction.text,
+            "hand": self.hand,
+            "success": self.success,
+            "part_instructed": self.instruction.part,
+            "part_touched": self.part_touched,
+            "anchor_error_mm": None if best is None else 1000 * best.solve.anchor_error,
+            "candidates_tried": len(self.candidates),
+            "chosen_rank": None if best is None else best.rank,
+            "times_s": self.stage_times(),
+            "notes": self.notes,
+        }
+
+
+class HandGeometry:
+    """Facts about a hand used to place proposals, computed once from its files."""
+
+    def __init__(self, hand: HandModel):
+        self.hand = hand
+        closing = hand.closing_direction
+        span = hand.upper - hand.lower
+        self.q_half = np.clip(hand.open_pose + 0.35 * closing * span, hand.lower, hand.upper)
+        names = list(hand.meta.anchor_fingers)
+        identity = torch.tensor([[0, 0, 0, 1.0, 0, 0, 0]], dtype=torch.float64)
+        half = hand.fingertip_positions(identity, torch.tensor(self.q_half[None]), names)[0].numpy()
+        opened = hand.fingertip_positions(identity, torch.tensor(hand.open_pose[None]), names)[0]
+        opened = opened.numpy()
+        n = hand.meta.palm.normal
+        thumb_to_fingers = half[1:].mean(axis=0) - half[0]
+        self.opposition = thumb_to_fingers - n * (thumb_to_fingers @ n)
+        self.opposition /= np.linalg.norm(self.opposition)
+        self.normal = n
+        self.tip_centroid = half.mean(axis=0)
+        lateral = opened[-1] - opened[1]  # first to last non-thumb anchor finger
+        self.lateral = lateral / np.linalg.norm(lateral)
+        self.spacing = float(np.mean(np.linalg.norm(np.diff(opened[1:], axis=0), axis=1)))
+
+
+class FunctionalPlanner:
+    """Plans functional grasps on part-labelled objects for one hand."""
+
+    def __init__(self, hand: HandModel | str, settings: PlannerSettings | None = None):
+        self.hand = hand if isinstance(hand, HandModel) else load_hand(hand)
+        self.settings = settings or PlannerSettings()
+
+    @cached_property
+    def geometry(self) -> HandGeometry:
+        return HandGeometry(self.hand)
+
+    # ---- proposals ------------------------------------------------------------------------
+    def propose(self, obj: ObjectModel, part: str) -> list[Proposal]:
+        """Wrist poses and anchors on `part`, best first."""
+        points, normals, labels = obj.points, obj.normals, obj.point_labels
+        mask = labels == obj.part_names.index(part)
+        pts, nrm = points[mask], normals[mask]
+        if len(pts) < 8:
+            raise PlanningError(
+                f"part {part!r} has only {len(pts)} surface points; cannot place anchors"
+            )
+        centre = pts.mean(axis=0)
+        _, _, axes = np.linalg.svd(pts - centre, full_matrices=False)
+        e1, e2, e3 = axes
+        t = (pts - centre) @ e1
+        geo = self.geometry
+        spacing = min(geo.spacing, max((t.max() - t.min()) / 3, 0.005))
+        tree = cKDTree(points)
+        proposals = []
+        for theta in np.deg2rad([0, 45, 90, 135]):
+            across = np.cos(theta) * e2 + np.sin(theta) * e3
+            for thumb_sign in (1, -1):
+                u = thumb_sign * across  # from thumb to fingers
+                for approach_sign in (1, -1):
+                    v = approach_sign * np.cross(e1, u)  # palm -> object
+                    proposals.append(self._proposal(pts, nrm, t, centre, u, v, e1, spacing, tree))
+        proposals.sort(key=lambda p: -p.score)
+        return proposals[: self.settings.max_candidates]
+
+    def _proposal(self, pts, nrm, t, centre, u, v, e1, spacing, tree) -> Proposal:
+        geo = self.geometry
+        rot, _ = Rotation.align_vectors([v, u], [geo.normal, geo.opposition], weights=[10, 1])
+        lateral_sign = np.sign(rot.apply(geo.lateral) @ e1) or 1.0
+        half_width = max(0.006, 0.15 * (t.max() - t.min()))
+        t_mid = (
+            float(np.clip(0.0, t.min() + spacing, t.max() - spacing))
+            if np.ptp(t) > 2 * spacing
+            else 0.0
+        )
+
+        def extreme(t_at: float, direction: np.ndarray) -> int:
+            near = np.abs(t - t_at) < half_width
+            if not near.any():
+                near = np.abs(t - t_at) <= np.abs(t - t_at).min() + 1e-9
+            idx = np.flatnonzero(near)
+            return int(idx[np.argmax(pts[idx] @ direction)])
+
+        chosen = [extreme(t_mid, -u)]
+        for k in (-1, 0, 1):
+            chosen.append(extreme(t_mid + k * lateral_sign * spacing, u))
+        anchors, normals = pts[chosen], nrm[chosen]
+        radii = np.array(
+            [self.hand.meta.fingertip(n).radius for n in self.hand.meta.anchor_fingers]
+        )
+        centres = anchors + normals * radii[:, None]
+        position = centres.mean(axis=0) - rot.apply(geo.tip_centroid)
+        palm = centres.mean(axis=0) - v * self.settings.approach_clearance
+        clearance = min(float(tree.query(palm)[0]), 0.1)
+        outward = float(-v @ (anchors.mean(axis=0) - centre))
+        wrist = np.concatenate([position, rot.as_quat(scalar_first=True)])
+        # the palm rests on the part's near side, behind the anchors: an enclosing grasp
+        mid = anchors.mean(axis=0)
+        off_axis = (pts - mid) - np.outer((pts - mid) @ v, v)
+        near_line = np.linalg.norm(off_axis, axis=1) < 0.015
+        palm_target = None
+        if near_line.any():
+            nearest = pts[near_line][np.argmin(pts[near_line] @ v)]
+            palm_target = nearest - v * self.settings.palm_margin
+        score = clearance + 0.1 * outward
+        return Proposal(wrist, geo.q_half.copy(), anchors, normals, score, palm_target)
+
+    # ---- planning -------------------------------------------------------------------------
+    def plan(self, obj: ObjectModel, instruction: Instruction | str) -> PlanResult:
+        """Try proposals in order; return the first grasp that holds and touches the part."""
+        if isinstance(instruction, str):
+            instruction = parse_instruction(instruction)
+        notes = []
+        part = instruction.part
+        if not obj.labelled:
+            raise PlanningError(
+                "the object has no part labels, so the model-based planner cannot find the "
+                f"{part!r}; give labelled input (--part-labels) or a library object"
+            )
+        if part not in obj.part_names:
+            raise InstructionError(
+                f"part {part!r} is not a part of this object; its parts are {', '.join(obj.part_names)}"
+            )
+        start = time.perf_counter()
+        program = grasp_program(self.hand, obj.collision_pieces(), self.settings.program)
+        build = time.perf_counter() - start
+        proposals = self.propose(obj, part)
+        propose_time = time.perf_counter() - start - build
+        candidates: list[CandidateResult] = []
+        fallback = None
+        for rank, proposal in enumerate(proposals):
+            cand = self._try(program, obj, instruction, rank, proposal)
+            if rank == 0:
+                cand.times["build"] = build
+                cand.times["propose"] = propose_time
+            candidates.append(cand)
+            if cand.success and cand.part == part:
+                return PlanResult(instruction, self.hand.name, cand.grasp, candidates, notes)
+            if cand.success and fallback is None:
+                fallback = cand
+        if fallback is not None:
+            notes.append(
+                f"no holding grasp touched the {part}; returning one that touches {fallback.part}"
+            )
+            return PlanResult(instruction, self.hand.name, fallback.grasp, candidates, notes)
+        return PlanResult(instruction, self.hand.name, None, candidates, notes)
+
+    def _try(self, program, obj, instruction, rank, proposal) -> CandidateResult:
+        t0 = time.perf_counter()
+        solved = program.solve(
+            GraspTargets(
+                proposal.wrist,
+                proposal.q,
+                proposal.anchors,
+                proposal.normals,
+                palm_target=proposal.palm_target if self.settings.use_palm else None,
+            )
+        )
+        cand = CandidateResult(rank, proposal, solved, times={"solve": solved.solve_time})
+        if not solved.ok:
+            return cand
+        t1 = time.perf_counter()
+        hand = self.hand
+        names = list(hand.meta.anchor_fingers)
+        wrist_t = torch.tensor(solved.wrist[None])
+        tips = hand.fingertip_positions(wrist_t, torch.tensor(solved.q[None]), names)[0].numpy()
+        nearest = np.argmin(np.linalg.norm(obj.points[None] - tips[:, None], axis=2), axis=1)
+        pre = program.pregrasp(solved.wrist, solved.q, obj.normals[nearest])
+        squeeze = program.squeeze(solved.q, pre)
+        grasp = Grasp(
+            hand=hand.name,
+            wrist_pos=solved.wrist[:3],
+            wrist_quat=solved.wrist[3:7],
+            grasp=solved.q,
+            pregrasp=pre,
+            squeeze=squeeze,
+            joint_names=tuple(hand.joint_names),
+            anchors=nearest_points(tips, obj.points),
+            instruction=instruction.text,
+        )
+        t2 = time.perf_counter()
+        result = validate(grasp, obj.collision_pieces(), hand, self.settings.protocol)
+        t3 = time.perf_counter()
+        all_tips = hand.fingertip_positions(wrist_t, torch.tensor(solved.q[None]))[0].numpy()
+        cand.part = voted_part(all_tips, obj.points, obj.point_labels, obj.part_names)
+        cand.success = bool(result.success)
+        cand.validation = result.to_dict()
+        grasp.metrics.update(
+            {
+                "success": cand.success,
+                "part": cand.part,
+                "anchor_error": solved.anchor_error,
+                "min_distance": solved.min_distance,
+                "validation": cand.validation,
+            }
+        )
+        cand.grasp = grasp
+        cand.times.update({"pregrasp": t2 - t1, "validate": t3 - t2, "total": t3 - t0})
+        return cand
+
+
+def plan_grasp(
+    obj: ObjectModel | np.ndarray | str,
+    text: str,
+    hand: HandModel | str,
+    settings: PlannerSettings | None = None,
+) -> PlanResult:
+    """Plan a functional grasp: `from planner import plan_grasp`.
+
+    obj: an ObjectModel (e.g. models.objects.make_object("mug", 3)), a mesh/cloud file or an
+    (N, 3) array in metres; text: "[Intent] a [Object] by [Part]"; hand: name or HandModel."""
+    if not isinstance(text, str) or not text.strip():
+        raise InstructionError('the instruction is empty; write e.g. "Use a mug by handle"')
+    if not isinstance(obj, ObjectModel):
+        obj = load_object(obj)
+    return FunctionalPlanner(hand, settings).plan(obj, parse_instruction(text))

@@ -1,0 +1,156 @@
+"""Grasps in Drake's Meshcat: the object with its parts coloured, the hand at pregrasp, grasp
+and squeeze, and the anchors.
+
+`show_live` serves the scene on localhost with a phase slider; `write_html` writes a
+self-contained page (Meshcat's StaticHtml) in which the three phases play as an animation.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+from pydrake.geometry import Box, Capsule, Meshcat, MeshcatAnimation, Rgba, Sphere
+from pydrake.math import RigidTransform, RotationMatrix
+
+from models.grasp import Grasp
+from models.hands import HandModel
+from models.objects import ObjectModel
+
+PART_COLOURS = [
+    (0.90, 0.45, 0.10),
+    (0.15, 0.50, 0.85),
+    (0.20, 0.70, 0.30),
+    (0.80, 0.20, 0.50),
+    (0.55, 0.40, 0.80),
+    (0.85, 0.75, 0.15),
+]
+HAND_RGBA = Rgba(0.25, 0.25, 0.28, 0.85)
+ANCHOR_RGBA = Rgba(0.95, 0.1, 0.1, 1.0)
+PHASES = ("pregrasp", "grasp", "squeeze")
+
+
+def _transform(matrix: np.ndarray) -> RigidTransform:
+    return RigidTransform(RotationMatrix(matrix[:3, :3]), matrix[:3, 3])
+
+
+def _shape(geom):
+    if geom.kind == "box":
+        return Box(*(2 * np.asarray(geom.size)))
+    if geom.kind == "sphere":
+        return Sphere(geom.size[0])
+    return Capsule(geom.size[0], 2 * geom.size[1])
+
+
+def draw_object(meshcat: Meshcat, obj: ObjectModel, path: str = "/object") -> None:
+    """The object: a mesh split by part label, or the surface points coloured by part."""
+    if obj.mesh is not None:
+        mesh = obj.mesh
+        labels = obj.face_labels if obj.face_labels is not None else np.zeros(len(mesh.faces), int)
+        for k in np.unique(labels):
+            faces = mesh.faces[labels == k]
+            used, inverse = np.unique(faces, return_inverse=True)
+            name = obj.part_names[k] if obj.part_names else "mesh"
+            rgb = PART_COLOURS[int(k) % len(PART_COLOURS)]
+            meshcat.SetTriangleMesh(
+                f"{path}/{name}",
+                mesh.vertices[used].T.astype(float),
+                inverse.reshape(-1, 3).T.astype(np.int32),
+                Rgba(*rgb, 1.0),
+            )
+        return
+    labels = obj.point_labels if obj.point_labels is not None else np.zeros(len(obj.points), int)
+    for k in np.unique(labels):
+        rgb = PART_COLOURS[int(k) % len(PART_COLOURS)]
+        name = obj.part_names[k] if obj.part_names else "cloud"
+        for i, p in enumerate(obj.points[labels == k][::4]):
+            meshcat.SetObject(f"{path}/{name}/{i}", Sphere(0.0015), Rgba(*rgb, 1.0))
+            meshcat.SetTransform(f"{path}/{name}/{i}", RigidTransform(p))
+
+
+def _link_poses(hand: HandModel, grasp: Grasp, phase: str) -> np.ndarray:
+    wrist = torch.tensor(grasp.wrist_pose(phase)[None], dtype=torch.float64)
+    q = torch.tensor(np.asarray(grasp.joints(phase))[None], dtype=torch.float64)
+    return hand.link_poses(wrist, q)[0].numpy()
+
+
+def draw_hand(meshcat: Meshcat, hand: HandModel, path: str = "/hand") -> None:
+    for link in hand.link_names:
+        for i, geom in enumerate(hand.tree.geoms[link]):
+            meshcat.SetObject(f"{path}/{link}/{i}", _shape(geom), HAND_RGBA)
+            meshcat.SetTransform(f"{path}/{link}/{i}", _transform(geom.pose))
+
+
+def pose_hand(meshcat: Meshcat, hand: HandModel, poses: np.ndarray, path: str = "/hand") -> None:
+    for link, pose in zip(hand.link_names, poses, strict=True):
+        meshcat.SetTransform(f"{path}/{link}", _transform(pose))
+
+
+def draw_anchors(meshcat: Meshcat, anchors: np.ndarray | None, path: str = "/anchors") -> None:
+    if anchors is None:
+        return
+    for i, p in enumerate(np.asarray(anchors)):
+        meshcat.SetObject(f"{path}/{i}", Sphere(0.004), ANCHOR_RGBA)
+        meshcat.SetTransform(f"{path}/{i}", RigidTransform(p))
+
+
+def build_scene(meshcat: Meshcat, grasp: Grasp, obj: ObjectModel, hand: HandModel) -> None:
+    meshcat.Delete()
+    meshcat.SetProperty("/Grid", "visible", False)
+    meshcat.SetProperty("/Axes", "visible", False)
+    draw_object(meshcat, obj)
+    draw_hand(meshcat, hand)
+    draw_anchors(meshcat, grasp.anchors)
+    pose_hand(meshcat, hand, _link_poses(hand, grasp, "grasp"))
+    centre = obj.points.mean(axis=0)
+    extent = float(np.linalg.norm(obj.extents))
+    meshcat.SetCameraPose(centre + np.array([1.2, -1.6, 1.0]) * max(extent, 0.15), centre)
+
+
+def _interpolated(hand: HandModel, grasp: Grasp, phase: float) -> np.ndarray:
+    """Link poses at a continuous phase in [0, 2]: 0 pregrasp, 1 grasp, 2 squeeze."""
+    lo = int(np.clip(np.floor(phase), 0, 1))
+    w = float(np.clip(phase - lo, 0, 1))
+    a, b = PHASES[lo], PHASES[lo + 1]
+    q = (1 - w) * np.asarray(grasp.joints(a)) + w * np.asarray(grasp.joints(b))
+    wrist = (1 - w) * grasp.wrist_pose(a) + w * grasp.wrist_pose(b)
+    qt = torch.tensor(q[None], dtype=torch.float64)
+    return hand.link_poses(torch.tensor(wrist[None], dtype=torch.float64), qt)[0].numpy()
+
+
+def write_html(grasp: Grasp, obj: ObjectModel, hand: HandModel, out: str | Path) -> Path:
+    """A self-contained page: the three phases play as an animation (loop it with the
+    Animations controls); it opens without a server."""
+    meshcat = Meshcat()
+    build_scene(meshcat, grasp, obj, hand)
+    fps = 10
+    anim = MeshcatAnimation(frames_per_second=fps)
+    frames = np.concatenate([np.full(5, 0.0), np.linspace(0, 2, 20), np.full(10, 2.0)])
+    for frame, phase in enumerate(frames):
+        for link, pose in zip(hand.link_names, _interpolated(hand, grasp, phase), strict=True):
+            anim.SetTransform(frame, f"/hand/{link}", _transform(pose))
+    meshcat.SetAnimation(anim)
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(meshcat.StaticHtml())
+    return out
+
+
+def show_live(
+    grasp: Grasp, obj: ObjectModel, hand: HandModel, seconds: float | None = None
+) -> None:
+    """Serve the scene on localhost with a phase slider until Ctrl+C (or `seconds`)."""
+    meshcat = Meshcat()
+    build_scene(meshcat, grasp, obj, hand)
+    slider = "phase: 0 pregrasp, 1 grasp, 2 squeeze"
+    meshcat.AddSlider(slider, 0.0, 2.0, 0.05, 1.0)
+    print(f"Meshcat is serving the grasp at {meshcat.web_url()} (Ctrl+C to stop)", flush=True)
+    last, start = None, time.monotonic()
+    while seconds is None or time.monotonic() - start < seconds:
+        value = meshcat.GetSliderValue(slider)
+        if value != last:
+            pose_hand(meshcat, hand, _interpolated(hand, grasp, value))
+            last = value
+        time.sleep(0.05)
