@@ -91,7 +91,7 @@ def wine_glass(rng: np.random.Generator) -> Parts:
     """Stemmed glass 15-19 cm tall: egg-shaped bowl, thin stem, flat foot."""
     rf, tf = rng.uniform(0.03, 0.037), 0.004
     rs, ls = rng.uniform(0.0035, 0.005), rng.uniform(0.06, 0.08)
-    Rm, hb, t = rng.uniform(0.035, 0.042), rng.uniform(0.08, 0.1), 0.0025
+    Rm, hb, t = rng.uniform(0.035, 0.042), rng.uniform(0.08, 0.1), 0.0035
     z0 = tf + ls
     foot = hull(np.vstack([circle(rf, 64), circle(rf - 0.002, 64) + [0, 0, tf]]))
     cone = cylinder_z(rf * 0.35, rs, tf - 0.001, tf + 0.008)
@@ -102,8 +102,8 @@ def wine_glass(rng: np.random.Generator) -> Parts:
     outer = np.stack([Rm * np.cos(phi_o), cz + cz * np.sin(phi_o)], 1)
     inner = np.stack([(Rm - t) * np.cos(phi_i), cz + (cz - t) * np.sin(phi_i)], 1)
     outer[0, 0] = inner[0, 0] = 0.0
-    outline, quads = shell_profile(outer, inner, coarse=4)
-    cup_ = revolve(outline, quads).translated((0, 0, z0))
+    outline, quads = shell_profile(outer, inner, coarse=3)
+    cup_ = revolve(outline, quads, sectors=12).translated((0, 0, z0))
     return {"bowl": [cup_], "stem": [stem, cone], "foot": [foot]}
 
 

@@ -228,15 +228,22 @@ def arc(
 def shell_profile(outer: np.ndarray, inner: np.ndarray, coarse: int) -> tuple[np.ndarray, list]:
     """Outline and convex quads of a shell between two (r, z) curves running bottom to top.
 
-    The outline closes the shell through the axis if both curves start at r = 0; the quads
-    (taken every `coarse` samples) become the collision pieces.
+    The quads (every `coarse` samples) become collision pieces. A straight chord of the inner
+    curve would cut into the hollow, so each quad's inner corners move toward the outer curve by
+    the chord's sagitta: the quad then stays in the wall.
     """
     outline = np.vstack([outer, inner[::-1]])
     idx = list(range(0, len(outer), coarse))
     if idx[-1] != len(outer) - 1:
         idx.append(len(outer) - 1)
-    quads = [
-        np.array([outer[a], outer[b], inner[b], inner[a]])
-        for a, b in zip(idx, idx[1:], strict=False)
-    ]
+    quads = []
+    for a, b in zip(idx, idx[1:], strict=False):
+        chord = inner[b] - inner[a]
+        normal = np.array([chord[1], -chord[0]]) / max(np.linalg.norm(chord), 1e-12)
+        if normal @ (outer[a] - inner[a]) < 0:
+            normal = -normal  # toward the material
+        sag = max(0.0, float(((inner[a : b + 1] - inner[a]) @ normal).max()))
+        quads.append(
+            np.array([outer[a], outer[b], inner[b] + sag * normal, inner[a] + sag * normal])
+        )
     return outline, quads
