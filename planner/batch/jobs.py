@@ -1,0 +1,173 @@
+"""Batch jobs: one (object, instruction, hand, variant) to solve, and the JSONL jobs file.
+
+A job carries everything its result depends on (object reference, instruction text, hand,
+variant index, planner caps, validation preset, and for a cross-hand transfer the source
+grasp), so a jobs file fully determines a batch: any machine, any number of workers, same
+results. Ids are readable and unique; the runner keys resumption on them.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from collections.abc import Iterable, Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+from models.errors import DrograspError
+from models.hands import available_hands
+from models.objects import SPLITS, categories, instructions, seeds
+
+
+class JobError(DrograspError, ValueError):
+    """A malformed jobs file or job (unknown field, duplicate id, bad object reference)."""
+
+
+def _slug(text: str) -> str:
+    return re.sub(r"[^A-Za-z0-9]+", "-", text).strip("-")
+
+
+def object_name(ref: dict[str, Any]) -> str:
+    """A short name for an object reference: `mug_00003` or a mesh file's stem."""
+    if "category" in ref:
+        return f"{ref['category']}_{int(ref.get('seed', 0)):05d}"
+    if "path" in ref:
+        return Path(ref["path"]).stem
+    raise JobError(f"object reference {ref} has neither category+seed nor path")
+
+
+@dataclass(frozen=True)
+class Job:
+    """What to solve. `variant` k makes the planner start at its k-th ranked proposal, so
+    variants of one (object, instruction, hand) give different wrist poses. With `source`
+    (a Grasp.to_dict() of another hand, validated) the job is a cross-hand transfer instead."""
+
+    object: dict[str, Any]  # planner.objectref.object_ref: {"category", "seed"} or {"path", ...}
+    instruction: str
+    hand: str
+    variant: int = 0
+    max_candidates: int = 8
+    protocol: str = "paper"
+    source: dict[str, Any] | None = None
+    id: str = field(default="")
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.object, dict):
+            raise JobError(f"job object must be a dict reference, got {self.object!r}")
+        object_name(self.object)
+        if not self.instruction or not self.hand:
+            raise JobError(f"job needs an instruction and a hand: {self!r}")
+        if self.variant < 0 or self.max_candidates < 1:
+            raise JobError(f"job variant must be >= 0 and max_candidates >= 1: {self!r}")
+        if self.source is not None and not {"id", "hand", "grasp"} <= set(self.source):
+            raise JobError("a transfer job's source needs id, hand and grasp")
+        if not self.id:
+            object.__setattr__(self, "id", self.default_id())
+
+    @property
+    def kind(self) -> str:
+        return "plan" if self.source is None else "transfer"
+
+    def default_id(self) -> str:
+        base = f"{self.hand}/{object_name(self.object)}/{_slug(self.instruction)}"
+        if self.source is None:
+            return f"{base}/v{self.variant}"
+        return f"{base}/from:{self.source['id']}"
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        if d["source"] is None:
+            d.pop("source")
+        return d
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> Job:
+        known = set(cls.__dataclass_fields__)
+        unknown = set(data) - known
+        if unknown:
+            raise JobError(f"unknown job fields {sorted(unknown)}; known: {sorted(known)}")
+        try:
+            return cls(**data)
+        except TypeError as err:
+            raise JobError(f"bad job {data}: {err}") from None
+
+
+def write_jobs(jobs: Iterable[Job], path: str | Path) -> Path:
+    """Write one JSON object per line (keys sorted, so the file is byte-stable)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    lines = [json.dumps(job.to_dict(), sort_keys=True) for job in jobs]
+    check_unique(Job.from_dict(json.loads(line)) for line in lines)
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text("".join(line + "\n" for line in lines))
+    tmp.replace(path)
+    return path
+
+
+def read_jobs(path: str | Path) -> list[Job]:
+    """Read a JSONL jobs file; blank lines and lines starting with # are skipped."""
+    path = Path(path)
+    if not path.is_file():
+        raise JobError(f"{path}: no such jobs file (make one with `drograsp jobs make`)")
+    jobs = []
+    for n, line in enumerate(path.read_text().splitlines(), 1):
+        if not line.strip() or line.lstrip().startswith("#"):
+            continue
+        try:
+            data = json.loads(line)
+        except json.JSONDecodeError as err:
+            raise JobError(f"{path}:{n}: not JSON ({err})") from None
+        if not isinstance(data, dict):
+            raise JobError(f"{path}:{n}: a job must be a JSON object")
+        jobs.append(Job.from_dict(data))
+    check_unique(jobs)
+    return jobs
+
+
+def check_unique(jobs: Iterable[Job]) -> None:
+    seen: set[str] = set()
+    for job in jobs:
+        if job.id in seen:
+            raise JobError(f"duplicate job id {job.id!r}: give distinct variants or ids")
+        seen.add(job.id)
+
+
+def make_jobs(
+    *,
+    hands: Sequence[str] | None = None,
+    splits: Sequence[str] = ("train", "val", "test"),
+    category_names: Sequence[str] | None = None,
+    objects_per_category: int = 10,
+    start_seed: int = 0,
+    variants: int = 2,
+    max_candidates: int = 8,
+    protocol: str = "paper",
+) -> list[Job]:
+    """Jobs from the object library and instruction table.
+
+    Seeds start_seed .. start_seed + objects_per_category - 1 of every category, kept where their
+    split is in `splits` (held-out categories only with "heldout"); every instruction of the
+    category; every hand; `variants` varied wrist poses each. Ordered by object, then hand, then
+    instruction, then variant, so a worker reuses the (hand, object) program it just built.
+    """
+    hands = list(hands or available_hands())
+    unknown = set(splits) - set(SPLITS)
+    if unknown:
+        raise JobError(f"unknown splits {sorted(unknown)}; choose from {SPLITS}")
+    names = list(category_names or categories())
+    if variants < 1 or objects_per_category < 1:
+        raise JobError("variants and objects_per_category must be at least 1")
+    jobs = []
+    for name in names:
+        chosen = set()
+        for split in splits:
+            chosen.update(seeds(name, split, objects_per_category, start_seed))
+        in_range = sorted(s for s in chosen if s < start_seed + objects_per_category)
+        for seed in in_range:
+            ref = {"category": name, "seed": seed}
+            for hand in hands:
+                for instr in instructions(name):
+                    for k in range(variants):
+                        jobs.append(Job(ref, instr.text, hand, k, max_candidates, protocol))
+    return jobs

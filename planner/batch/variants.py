@@ -1,0 +1,44 @@
+"""Varied wrist poses for one (object, instruction, hand): rotate the planner's proposals.
+
+FunctionalPlanner ranks a fixed set of proposals (wrist pose + anchors) and returns the first
+that holds. Variant k starts the same search at the k-th ranked proposal (wrapping around), so
+variants give different grasps where several proposals hold and the same search otherwise.
+"""
+
+from __future__ import annotations
+
+import sys
+from dataclasses import replace
+
+from models.hands import HandModel
+from models.objects import ObjectModel
+from planner.functional import FunctionalPlanner, PlannerSettings, Proposal
+
+ALL_PROPOSALS = sys.maxsize
+
+
+class VariantPlanner(FunctionalPlanner):
+    """A FunctionalPlanner whose proposals start at ranked proposal `variant`.
+
+    `max_candidates` proposals are still tried; `proposal_index(rank)` maps a candidate's rank
+    in this planner back to its position in the full ranking (what a dataset records)."""
+
+    def __init__(
+        self, hand: HandModel | str, settings: PlannerSettings | None = None, variant: int = 0
+    ):
+        super().__init__(hand, settings)
+        self.variant = int(variant)
+        self._ranker = FunctionalPlanner(
+            self.hand, replace(self.settings, max_candidates=ALL_PROPOSALS)
+        )
+        self._count = 0
+
+    def propose(self, obj: ObjectModel, part: str) -> list[Proposal]:
+        ranked = self._ranker.propose(obj, part)
+        self._count = len(ranked)
+        k = self.variant % max(len(ranked), 1)
+        return (ranked[k:] + ranked[:k])[: self.settings.max_candidates]
+
+    def proposal_index(self, rank: int) -> int:
+        """Position in the full ranking of the candidate tried `rank`-th (after `propose`)."""
+        return (rank + self.variant) % max(self._count, 1)
