@@ -38,6 +38,9 @@ def estimate_normals(
     between normals and the offset across the tangent plane, so it follows each sheet of a thin
     wall instead of jumping through it (a mug's inner wall keeps normals facing the cavity); each
     connected component starts from its point farthest from its centroid, facing outward.
+    Limitation: a wall must be thicker than about twice the point spacing (a 4 mm mug wall needs
+    ~20k points on the mug); sparser clouds of thin walls get mixed-up normals, so pass normals
+    or a viewpoint for those.
     """
     pts = np.asarray(points, dtype=float)
     k = min(k, len(pts) - 1)

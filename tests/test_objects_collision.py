@@ -1,0 +1,120 @@
+"""Collision pieces: cloud pieces keep cavities open; CoACD is cached; real scans all work."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from models.objects import cache_dir, coacd_pieces, contains, load_object, make_object
+
+REFERENCE = Path(__file__).resolve().parents[1].parent / "shared" / "reference"
+
+
+def _mug_probes(mug) -> tuple[np.ndarray, np.ndarray]:
+    """A point in the middle of the handle's hole and one in the middle of the opposite wall."""
+    v, f, lab = mug.mesh.vertices, mug.mesh.faces, mug.face_labels
+    body, handle = v[np.unique(f[lab == 0])], v[np.unique(f[lab == 1])]
+    cx, cy = (
+        0.5 * (body[:, 0].max() + body[:, 0].min()),
+        0.5 * (body[:, 1].max() + body[:, 1].min()),
+    )
+    zlo, zhi = body[:, 2].min(), body[:, 2].max()
+    upper = body[body[:, 2] > zlo + 0.02]
+    r = np.hypot(upper[:, 0] - cx, upper[:, 1] - cy)
+    r_out, r_in = r.max(), r.min()
+    zm = 0.5 * (handle[:, 2].min() + handle[:, 2].max())
+    band = handle[(np.abs(handle[:, 2] - zm) < 0.004) & (handle[:, 0] > cx + r_out)]
+    hole = np.array([0.5 * (cx + r_out + band[:, 0].min()), cy, zm])
+    wall = np.array([cx - 0.5 * (r_out + r_in), cy, 0.5 * (zlo + zhi)])
+    return hole, wall
+
+
+@pytest.mark.parametrize("seed", [0, 3, 9])
+def test_cloud_pieces_keep_the_handle_hole_open_and_fill_the_wall(seed):
+    mug = make_object("mug", seed)
+    hole, wall = _mug_probes(mug)
+    assert not mug.mesh.contains([hole])[0] and mug.mesh.contains([wall])[0]  # probes are right
+    cloud = load_object(mug.sample_cloud(20000, seed=seed).points)
+    pieces = cloud.collision_pieces()
+    assert 8 <= len(pieces) <= 300
+    assert not contains(pieces, hole), "a piece bridges the handle's hole"
+    assert contains(pieces, wall), "no piece holds the middle of the wall"
+    # the inside of the mug stays open too
+    body = mug.mesh.vertices[np.unique(mug.mesh.faces[mug.face_labels == 0])]
+    centre = np.array([0.5 * (body[:, 0].max() + body[:, 0].min()), 0.0, 0.0])
+    assert not contains(pieces, centre), "a piece fills the mug's inside"
+    for p in pieces:
+        assert p.is_watertight and p.volume > 0
+
+
+def test_cloud_pieces_do_not_stray_outside_the_object():
+    mug = make_object("mug", 4)
+    pieces = load_object(mug.sample_cloud(20000, seed=1).points).collision_pieces()
+    rng = np.random.default_rng(0)
+    probes = np.vstack(
+        [p.sample(50, seed=rng) if hasattr(p, "sample") else p.vertices for p in pieces]
+    )
+    import trimesh
+
+    depth = trimesh.proximity.signed_distance(mug.mesh, probes[::4])
+    # slabs may cut a concave corner by up to their split tolerance (3 mm + 2 x spacing) ...
+    assert depth.min() > -0.006
+    # ... but almost everywhere they hug the surface
+    assert np.percentile(depth, 5) > -0.0015
+
+
+def test_coacd_is_cached_by_content(tmp_path, monkeypatch):
+    monkeypatch.setenv("DROGRASP_CACHE", str(tmp_path))
+    knife = make_object("knife", 2)  # 300-odd faces: CoACD takes under a second
+    first = coacd_pieces(knife.mesh)
+    files = list((tmp_path / "coacd").glob("*.npz"))
+    assert cache_dir("coacd") == tmp_path / "coacd" and len(files) == 1
+    again = coacd_pieces(knife.mesh)
+    assert len(again) == len(first) >= 1
+    for a, b in zip(first, again, strict=True):
+        np.testing.assert_array_equal(a.vertices, b.vertices)
+    # the stored entry is what is read: a changed mesh is a different key
+    coacd_pieces(make_object("knife", 3).mesh)
+    assert len(list((tmp_path / "coacd").glob("*.npz"))) == 2
+    assert sum(p.volume for p in first) == pytest.approx(knife.mesh.volume, rel=0.15)
+
+
+def _reference_meshes() -> list[Path]:
+    return sorted((REFERENCE / "objects").glob("*/*.obj"))
+
+
+def test_reference_meshes_load_fast():
+    meshes = _reference_meshes()
+    if not meshes:
+        pytest.skip(f"reference objects not found at {REFERENCE / 'objects'}")
+    for path in meshes:
+        obj = load_object(path)
+        assert obj.mesh is not None and len(obj.mesh.faces) > 0
+        assert 0.01 < obj.extents.max() < 1.0
+        s = obj.sample_cloud(2048, seed=0)
+        assert np.isfinite(s.points).all() and np.isfinite(s.normals).all()
+        assert obj.fps(512).points.shape == (512, 3)
+    # cloud pieces for one real scan, from its samples (fast path)
+    pieces = load_object(
+        load_object(meshes[0]).sample_cloud(20000, seed=0).points
+    ).collision_pieces()
+    assert pieces
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("index", range(15))
+def test_reference_mesh_gets_coacd_pieces(index):
+    meshes = _reference_meshes()
+    if not meshes:
+        pytest.skip(f"reference objects not found at {REFERENCE / 'objects'}")
+    if index >= len(meshes):
+        pytest.skip(f"only {len(meshes)} reference meshes")
+    obj = load_object(meshes[index])
+    pieces = obj.collision_pieces()  # CoACD, cached in ~/.cache/drograsp (or $DROGRASP_CACHE)
+    assert pieces and all(p.volume > 0 and p.is_watertight for p in pieces)
+    lo = np.min([p.bounds[0] for p in pieces], axis=0)
+    hi = np.max([p.bounds[1] for p in pieces], axis=0)
+    np.testing.assert_allclose(lo, obj.mesh.bounds[0], atol=0.01)
+    np.testing.assert_allclose(hi, obj.mesh.bounds[1], atol=0.01)

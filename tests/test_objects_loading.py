@@ -1,0 +1,191 @@
+"""Loading meshes and clouds: formats, cleaning, normals, and every refusal with its message."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+
+from models.errors import ObjectError
+from models.objects import load_object, make_object
+
+
+def _ball(n: int = 2000, radius: float = 0.04, seed: int = 0) -> np.ndarray:
+    v = np.random.default_rng(seed).normal(size=(n, 3))
+    return radius * v / np.linalg.norm(v, axis=1, keepdims=True)
+
+
+@pytest.mark.parametrize("suffix", [".obj", ".stl", ".ply", ".glb"])
+def test_mesh_formats(tmp_path, suffix):
+    mesh = make_object("mug", 0).mesh
+    path = tmp_path / f"mug{suffix}"
+    mesh.export(path)
+    obj = load_object(path)
+    assert obj.mesh is not None and not obj.is_cloud
+    assert obj.name == "mug" and obj.source == str(path)
+    np.testing.assert_allclose(obj.mesh.volume, mesh.volume, rtol=1e-3)
+    assert obj.points.shape == (16384, 3) and obj.point_labels is None and not obj.labelled
+
+
+@pytest.mark.parametrize("suffix", [".npy", ".ply", ".pcd", ".xyz"])
+def test_cloud_formats(tmp_path, suffix):
+    pts = _ball()
+    path = tmp_path / f"ball{suffix}"
+    if suffix == ".npy":
+        np.save(path, pts)
+    elif suffix == ".xyz":
+        np.savetxt(path, pts)
+    elif suffix == ".ply":
+        trimesh.PointCloud(pts).export(path)
+    else:
+        import open3d as o3d
+
+        pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts))
+        o3d.io.write_point_cloud(str(path), pc)
+    obj = load_object(path)
+    assert obj.is_cloud and obj.mesh is None
+    np.testing.assert_allclose(obj.points, pts, atol=1e-6)
+
+
+def test_array_cloud_gets_outward_normals():
+    pts = _ball(3000)
+    obj = load_object(pts)
+    radial = pts / np.linalg.norm(pts, axis=1, keepdims=True)
+    assert (np.einsum("ij,ij->i", obj.normals, radial) > 0.9).mean() > 0.99
+
+
+def test_mug_cloud_normals_follow_both_sides_of_the_wall():
+    mug = make_object("mug", 1)
+    # dense enough that the point spacing (~1.5 mm) is well under the wall thickness (4-6 mm);
+    # sparser clouds of thin walls need given normals or a viewpoint (see estimate_normals)
+    s = mug.sample_cloud(20000, seed=3)
+    est = load_object(s.points).normals
+    agree = np.einsum("ij,ij->i", est, s.normals) > 0
+    assert agree.mean() > 0.97  # including the inner wall, whose normals face the hollow
+
+
+def test_viewpoint_orients_toward_camera():
+    pts = _ball(2000)
+    camera = np.array([0.0, 0.0, 1.0])
+    obj = load_object(pts[pts[:, 2] > 0], viewpoint=camera)
+    assert (np.einsum("ij,ij->i", obj.normals, camera - obj.points) > 0).all()
+
+
+def test_given_normals_and_labels_are_kept():
+    pts = _ball(500)
+    labels = (pts[:, 2] > 0).astype(int)
+    obj = load_object(np.hstack([pts, 2 * pts]), labels=labels, part_names=("bottom", "top"))
+    np.testing.assert_allclose(obj.normals, pts / 0.04, atol=1e-9)
+    assert obj.labelled and obj.part_names == ("bottom", "top")
+    s = obj.sample_cloud(100, seed=1)
+    np.testing.assert_array_equal(s.labels, labels[s.index])
+
+
+def test_scale_converts_millimetres():
+    obj = load_object(_ball() * 1000, scale=0.001)
+    assert obj.extents.max() == pytest.approx(0.08, rel=0.05)
+
+
+def test_scan_like_mesh_is_cleaned():
+    # UV-seam duplicates, a zero-area face and an open boundary, as in real scans
+    box = trimesh.creation.box((0.05, 0.06, 0.07))
+    tris = box.triangles[:-2]  # drop two faces: not watertight
+    verts = tris.reshape(-1, 3)  # every face has its own vertices (seams everywhere)
+    faces = np.arange(len(verts)).reshape(-1, 3)
+    verts = np.vstack([verts, verts[:1], verts[:1], verts[:1]])
+    faces = np.vstack([faces, [[len(verts) - 3, len(verts) - 2, len(verts) - 1]]])  # zero area
+    obj = load_object(_write(trimesh.Trimesh(verts, faces, process=False)))
+    assert len(obj.mesh.faces) == 10 and len(obj.mesh.vertices) == 8
+    assert obj.points.shape[1] == 3
+
+
+def _write(mesh: trimesh.Trimesh):
+    import tempfile
+    from pathlib import Path
+
+    path = Path(tempfile.mkdtemp()) / "scan.obj"
+    mesh.export(path)
+    return path
+
+
+# ---- refusals ---------------------------------------------------------------------------
+
+
+def test_missing_file(tmp_path):
+    with pytest.raises(ObjectError, match="not found: .*nothing.obj; check the path"):
+        load_object(tmp_path / "nothing.obj")
+
+
+def test_unreadable_file(tmp_path):
+    path = tmp_path / "broken.stl"
+    path.write_bytes(b"solid x\n facet normal 0 0 1\n  outer loop\n   vertex 0 0 nan")
+    with pytest.raises(ObjectError, match="could not read|no triangle mesh|NaN|empty"):
+        load_object(path)
+    npy = tmp_path / "broken.npy"
+    npy.write_bytes(b"\x93NUMPY garbage")
+    with pytest.raises(ObjectError, match="could not read .*broken.npy"):
+        load_object(npy)
+
+
+def test_unsupported_format(tmp_path):
+    path = tmp_path / "thing.docx"
+    path.write_text("x")
+    with pytest.raises(ObjectError, match="unsupported format '.docx'"):
+        load_object(path)
+
+
+def test_empty_cloud():
+    with pytest.raises(ObjectError, match="empty: it has no points"):
+        load_object(np.zeros((0, 3)))
+
+
+def test_nan_and_inf():
+    pts = _ball()
+    pts[3, 1] = np.nan
+    pts[9, 0] = np.inf
+    with pytest.raises(ObjectError, match=r"2 of 2000 points with NaN or inf.*isfinite"):
+        load_object(pts)
+
+
+def test_too_few_points():
+    with pytest.raises(ObjectError, match="only 63 points; at least 64"):
+        load_object(_ball(63))
+
+
+def test_millimetres_refused_with_the_fix():
+    with pytest.raises(
+        ObjectError, match=r"largest extent \d+\.\d+ exceeds 1 m.*millimetres.*divide by 1000"
+    ):
+        load_object(_ball() * 1000)
+
+
+def test_centimetres_refused_with_the_fix():
+    with pytest.raises(ObjectError, match="centimetres; divide by 100"):
+        load_object(_ball() * 100)
+
+
+def test_too_small():
+    with pytest.raises(ObjectError, match="below 1 cm.*metres"):
+        load_object(_ball(radius=0.002))
+
+
+def test_flat_and_collinear():
+    rng = np.random.default_rng(0)
+    flat = np.c_[rng.uniform(-0.05, 0.05, (500, 2)), np.zeros(500)]
+    with pytest.raises(ObjectError, match="degenerate: it is flat"):
+        load_object(flat)
+    line = np.outer(np.linspace(0, 0.1, 200), [1.0, 2.0, 0.5])
+    with pytest.raises(ObjectError, match="degenerate: its points are collinear"):
+        load_object(line)
+    plane = trimesh.Trimesh(
+        [[0, 0, 0], [0.1, 0, 0], [0, 0.1, 0], [0.1, 0.1, 0]], [[0, 1, 2], [1, 3, 2]]
+    )
+    with pytest.raises(ObjectError, match="flat"):
+        load_object(_write(plane))
+
+
+def test_bad_shape_and_bad_labels():
+    with pytest.raises(ObjectError, match=r"shape \(100, 2\); expected \(N, 3\)"):
+        load_object(np.zeros((100, 2)))
+    with pytest.raises(ObjectError, match="labels need part_names"):
+        load_object(_ball(), labels=np.zeros(2000, dtype=int))
