@@ -130,23 +130,25 @@ def cloud_pieces(
     normals: np.ndarray,
     *,
     thickness: float = 0.003,
+    slack: float = 0.0015,
     clusters: int = 24,
     min_points: int = 12,
     seed: int = 0,
 ) -> list[trimesh.Trimesh]:
-    """Fast approximate convex pieces of a surface cloud (about 0.2 s for 20k points).
+    """Fast approximate convex pieces of a surface cloud (a few tenths of a second for 20k points).
 
     k-means groups nearby points; each group plus its copy pushed `thickness` inward along the
-    normals spans a thin convex slab under the surface. A slab whose interior strays farther than
-    `thickness` plus twice the point spacing from every cloud point bridges a gap (across a handle's
-    hole, a mug's opening) and is split in two until it does not.
+    normals spans a convex slab under the surface. A slab with a probe point farther than
+    `slack` plus twice the point spacing from the cloud, on the outer side of its nearest point,
+    bridges a gap (a handle's hole, a mug's opening) and is split in two until it does not; so a
+    piece pokes out of the object by at most about that distance, at concave places.
     """
     pts = np.asarray(points, dtype=float)
     nrm = np.asarray(normals, dtype=float)
     tree = cKDTree(pts)
     probe = pts[:: max(1, len(pts) // 2000)]
     spacing = float(np.median(tree.query(probe, k=2)[0][:, 1]))
-    tol = thickness + 2.0 * spacing
+    tol = slack + 2.0 * spacing
     rng = np.random.default_rng(seed)
     k = int(min(clusters, max(1, len(pts) // min_points)))
     _, assign = kmeans2(pts, k, minit="++", iter=8, seed=rng)
@@ -161,7 +163,7 @@ def cloud_pieces(
             qhull = ConvexHull(slab)
         except QhullError:
             continue  # flat or tiny: no volume to collide with
-        if len(members) < 2 * min_points or _covers_only_surface(slab, qhull, tree, tol, rng):
+        if len(members) < 2 * min_points or _stays_in_object(slab, qhull, tree, nrm, tol, rng):
             piece = hull_mesh(slab, qhull)
             if piece is not None:
                 accepted.append(piece)
@@ -170,16 +172,31 @@ def cloud_pieces(
     return accepted
 
 
-def _covers_only_surface(
-    slab: np.ndarray, qhull: ConvexHull, tree: cKDTree, tol: float, rng: np.random.Generator
+def _stays_in_object(
+    slab: np.ndarray,
+    qhull: ConvexHull,
+    tree: cKDTree,
+    normals: np.ndarray,
+    tol: float,
+    rng: np.random.Generator,
 ) -> bool:
-    """True when every probe inside the slab's hull lies within tol of the cloud."""
+    """True when no probe inside the slab's hull lies clearly outside the object.
+
+    A probe is outside when it is farther than tol from the cloud and on the outer side of its
+    nearest point (along that point's normal): a hole, a hollow, a gap between parts. Deep probes
+    behind the surface are inside a solid and fine, so solid objects need few pieces.
+    """
     v = slab[qhull.vertices]
     tri = slab[qhull.simplices]
     centre = v.mean(0)
     w = rng.dirichlet(np.full(len(v), 0.3), size=64)
-    probes = np.vstack([tri.mean(1), w @ v, 0.5 * (tri.mean(1) + centre)])
-    return bool(tree.query(probes, k=1)[0].max() <= tol)
+    probes = np.vstack([tri.mean(1), w @ v, 0.5 * (tri.mean(1) + centre), centre[None]])
+    dist, idx = tree.query(probes, k=1)
+    far = dist > tol
+    if not far.any():
+        return True
+    side = np.einsum("ij,ij->i", normals[idx[far]], probes[far] - tree.data[idx[far]])
+    return bool((side < 0).all())
 
 
 def _split(pts: np.ndarray, members: np.ndarray) -> list[np.ndarray]:
