@@ -21,7 +21,7 @@ from planner.batch.jobs import Job
 
 JobFn = Callable[[Job], dict[str, Any]]
 Indexed = tuple[int, Job]
-MAX_ATTEMPTS = 2  # a job whose worker dies twice is recorded as crashed
+MAX_RAY_ATTEMPTS = 2  # Ray retries a task whose worker died once
 
 
 def _one_thread() -> None:
@@ -66,49 +66,53 @@ def run_serial(job_fn: JobFn, items: Sequence[Indexed]) -> Iterator[tuple[int, d
         yield index, run_one(job_fn, job)
 
 
-def _pool(workers: int) -> ProcessPoolExecutor:
-    # forkserver: workers fork from a clean server process that has imported the planner once,
-    # never from a parent whose torch/OpenMP threads are running (fork-unsafe).
+def _pool(workers: int, job_fn: JobFn) -> ProcessPoolExecutor:
+    # forkserver: workers fork from a clean server process that has imported the job function's
+    # module once, never from a parent whose torch/OpenMP threads run (fork-unsafe).
     ctx = mp.get_context("forkserver")
-    ctx.set_forkserver_preload(["planner.batch.solve"])
+    ctx.set_forkserver_preload([job_fn.__module__])
     return ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_one_thread)
 
 
 def run_pool(job_fn: JobFn, items: Sequence[Indexed], workers: int) -> Iterator[tuple[int, dict]]:
     """A local process pool with at most 2 jobs queued per worker (memory stays flat on big
     batches). A worker that dies (segfault, OOM) breaks the pool: the pool is rebuilt and the
-    jobs in flight are retried; one that kills its worker MAX_ATTEMPTS times is recorded."""
+    jobs that were in flight are retried one at a time, so the one that kills its worker alone
+    is recorded as crashed and the others complete."""
     queue = list(reversed(items))
-    attempts: dict[int, int] = {}
-    window = 2 * workers
-    while queue:
-        pool = _pool(workers)
-        inflight: dict[Future, Indexed] = {}
+    suspects: list[Indexed] = []
+    while queue or suspects:
+        pool = _pool(workers, job_fn)
+        inflight: dict[Future, tuple[Indexed, bool]] = {}  # future -> (job, run alone)
         broken = False
         try:
-            while queue or inflight:
-                while queue and len(inflight) < window and not broken:
-                    item = queue.pop()
-                    inflight[pool.submit(run_one, job_fn, item[1])] = item
+            while not broken:
+                alone_running = any(alone for _, alone in inflight.values())
+                if suspects and not inflight:
+                    item = suspects.pop()
+                    inflight[pool.submit(run_one, job_fn, item[1])] = (item, True)
+                elif not suspects and not alone_running:
+                    while queue and len(inflight) < 2 * workers:
+                        item = queue.pop()
+                        inflight[pool.submit(run_one, job_fn, item[1])] = (item, False)
                 if not inflight:
                     break
                 done, _ = wait(inflight, return_when=FIRST_COMPLETED)
                 for future in done:
-                    item = inflight.pop(future)
+                    item, alone = inflight.pop(future)
                     try:
                         yield item[0], future.result()
                     except BrokenProcessPool:
                         broken = True
-                        attempts[item[0]] = attempts.get(item[0], 0) + 1
-                        if attempts[item[0]] >= MAX_ATTEMPTS:
-                            msg = f"the worker process died {MAX_ATTEMPTS} times running this job"
+                        if alone:
+                            msg = "the worker process died running this job (alone)"
                             yield item[0], error_record(item[1], "WorkerCrashed", msg)
                         else:
-                            queue.append(item)
+                            suspects.append(item)
                     except Exception as err:  # noqa: BLE001 - e.g. an unpicklable result
                         yield item[0], error_record(item[1], type(err).__name__, str(err))
-                if broken and not inflight:
-                    break
+            for item, _ in inflight.values():  # the broken pool fails them all
+                suspects.append(item)
         finally:
             pool.shutdown(wait=not broken, cancel_futures=True)
 
@@ -135,7 +139,7 @@ def run_ray(
         started = True
     try:
         capacity = int(ray.cluster_resources().get("CPU", workers)) if address else workers
-        remote = ray.remote(num_cpus=1, max_retries=MAX_ATTEMPTS - 1)(run_one)
+        remote = ray.remote(num_cpus=1, max_retries=MAX_RAY_ATTEMPTS - 1)(run_one)
         fn_ref = ray.put(job_fn)
         queue = list(reversed(items))
         inflight: dict[Any, Indexed] = {}
