@@ -131,13 +131,15 @@ class HandGeometry:
         opened = hand.fingertip_positions(identity, torch.tensor(hand.open_pose[None]), names)[0]
         opened = opened.numpy()
         n = hand.meta.palm.normal
-        thumb_to_fingers = half[1:].mean(axis=0) - half[0]
-        self.opposition = thumb_to_fingers - n * (thumb_to_fingers @ n)
-        self.opposition /= np.linalg.norm(self.opposition)
+        lateral = opened[-1] - opened[1]  # first to last non-thumb anchor finger
+        lateral -= n * (lateral @ n)
+        self.lateral = lateral / np.linalg.norm(lateral)
+        # thumb -> fingers across the grasped part: off the finger row and the palm normal
+        thumb_to_fingers = opened[1:].mean(axis=0) - opened[0]
+        across = np.cross(n, self.lateral)
+        self.opposition = across * np.sign(thumb_to_fingers @ across)
         self.normal = n
         self.tip_centroid = half.mean(axis=0)
-        lateral = opened[-1] - opened[1]  # first to last non-thumb anchor finger
-        self.lateral = lateral / np.linalg.norm(lateral)
         self.spacing = float(np.mean(np.linalg.norm(np.diff(opened[1:], axis=0), axis=1)))
 
 
@@ -170,19 +172,19 @@ class FunctionalPlanner:
         spacing = min(geo.spacing, max((t.max() - t.min()) / 3, 0.005))
         tree = cKDTree(points)
         proposals = []
-        for theta in np.deg2rad([0, 45, 90, 135]):
-            across = np.cos(theta) * e2 + np.sin(theta) * e3
-            for thumb_sign in (1, -1):
-                u = thumb_sign * across  # from thumb to fingers
-                for approach_sign in (1, -1):
-                    v = approach_sign * np.cross(e1, u)  # palm -> object
-                    proposals.append(self._proposal(pts, nrm, t, centre, u, v, e1, spacing, tree))
+        for theta in np.deg2rad(np.arange(0, 360, 45)):
+            v = np.cos(theta) * e2 + np.sin(theta) * e3  # palm -> object, across the long axis
+            for lateral_sign in (1.0, -1.0):  # finger row along +e1 or -e1
+                rot, _ = Rotation.align_vectors(
+                    [v, lateral_sign * e1], [geo.normal, geo.lateral], weights=[10, 1]
+                )
+                u = rot.apply(geo.opposition)  # thumb -> fingers, in the world
+                proposals.append(self._proposal(pts, nrm, t, centre, rot, u, v, e1, spacing, tree))
         proposals.sort(key=lambda p: -p.score)
         return proposals[: self.settings.max_candidates]
 
-    def _proposal(self, pts, nrm, t, centre, u, v, e1, spacing, tree) -> Proposal:
+    def _proposal(self, pts, nrm, t, centre, rot, u, v, e1, spacing, tree) -> Proposal:
         geo = self.geometry
-        rot, _ = Rotation.align_vectors([v, u], [geo.normal, geo.opposition], weights=[10, 1])
         lateral_sign = np.sign(rot.apply(geo.lateral) @ e1) or 1.0
         half_width = max(0.006, 0.15 * (t.max() - t.min()))
         t_mid = (

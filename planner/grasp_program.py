@@ -43,7 +43,7 @@ class ProgramSettings:
     min_distance: float = 0.0005  # hand-object signed distance lower bound (m): about touching
     influence_distance: float = 0.02
     penetration_tolerance: float = 0.002  # accepted penetration when checking an answer (m)
-    anchor_tolerance: float = 0.01  # accepted fingertip-surface to anchor distance (m)
+    anchor_tolerance: float = 0.025  # accepted fingertip-surface to anchor distance (m)
     major_optimality: float = 1e-3
     major_feasibility: float = 1e-5
     major_iterations: int = 150
