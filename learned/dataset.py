@@ -1,0 +1,176 @@
+"""The functional grasp dataset: compact per-split arrays, a torch Dataset, and its counts.
+
+A dataset folder holds `meta.json` (name tables and format) and one `<split>.npz` per split
+(no pickle). Objects are not stored: each row names a library (category, seed), and
+`models.objects.make_object` regenerates it. Joint arrays are padded to the largest hand's DoF
+with a mask, so hands of different DoF share one array. Written by
+`planner.batch.dataset.compact` (`drograsp dataset compact|generate`).
+"""
+
+from __future__ import annotations
+
+import json
+from collections import Counter
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from torch.utils.data import Dataset
+
+from models.errors import DrograspError
+
+FORMAT = "drograsp-grasps/1"
+SPLIT_NAMES: tuple[str, ...] = ("train", "val", "test", "heldout")
+SOURCES: tuple[str, ...] = ("plan", "transfer")
+METRICS: tuple[str, ...] = (
+    "anchor_error",  # m, worst anchor fingertip to anchor point
+    "min_distance",  # m, hand-object signed distance at the grasp
+    "translation",  # m, worst object displacement in validation
+    "rotation_deg",  # worst object rotation in validation
+    "grasp_penetration",  # m
+    "contact_count",  # hand bodies in contact at the grasp
+)
+# name -> (dtype, trailing shape or None for per-row scalars; "dof" = padded joint count)
+ARRAYS: dict[str, tuple[str, tuple]] = {
+    "hand": ("int16", ()),
+    "category": ("int16", ()),
+    "seed": ("int32", ()),
+    "instruction": ("int16", ()),
+    "intent": ("int8", ()),
+    "part": ("int16", ()),  # voted part (equals the instructed part in a valid grasp)
+    "source": ("int8", ()),  # index into SOURCES
+    "variant": ("int16", ()),  # planner variant; -1 for transfers
+    "wrist": ("float32", (7,)),  # xyz + quaternion wxyz
+    "q_grasp": ("float32", ("dof",)),
+    "q_pregrasp": ("float32", ("dof",)),
+    "q_squeeze": ("float32", ("dof",)),
+    "dof_mask": ("bool", ("dof",)),
+    "anchors": ("float32", (4, 3)),  # object points nearest the 4 anchor fingertips
+    "metrics": ("float32", (len(METRICS),)),
+}
+
+
+class DatasetError(DrograspError, ValueError):
+    """A dataset folder that is missing, of another format, or inconsistent."""
+
+
+@dataclass
+class GraspArrays:
+    """One split: the arrays of ARRAYS plus the name tables of meta.json."""
+
+    split: str
+    arrays: dict[str, np.ndarray]
+    meta: dict[str, Any]
+
+    def __len__(self) -> int:
+        return int(len(self.arrays["hand"]))
+
+    def names(self, table: str, column: str | None = None) -> list[str]:
+        """Per-row names: e.g. names("hands", "hand") -> ["leap", "shadow", ...]."""
+        values = self.meta[table]
+        return [values[i] for i in self.arrays[column or table.rstrip("s")]]
+
+
+def read_meta(root: str | Path) -> dict[str, Any]:
+    path = Path(root) / "meta.json"
+    if not path.is_file():
+        raise DatasetError(
+            f"{root}: no dataset here (meta.json missing); make one with `drograsp dataset "
+            "generate` or `drograsp dataset compact`"
+        )
+    meta = json.loads(path.read_text())
+    if meta.get("format") != FORMAT:
+        raise DatasetError(f"{path}: format {meta.get('format')!r}, this code reads {FORMAT!r}")
+    return meta
+
+
+def load_split(root: str | Path, split: str) -> GraspArrays:
+    """The arrays of one split (an empty split has zero rows)."""
+    meta = read_meta(root)
+    if split not in SPLIT_NAMES:
+        raise DatasetError(f"unknown split {split!r}; choose one of {SPLIT_NAMES}")
+    path = Path(root) / f"{split}.npz"
+    if not path.is_file():
+        raise DatasetError(f"{path} missing: the dataset folder is incomplete")
+    with np.load(path, allow_pickle=False) as npz:
+        arrays = {k: npz[k] for k in npz.files}
+    missing = set(ARRAYS) - set(arrays)
+    if missing:
+        raise DatasetError(f"{path} lacks arrays {sorted(missing)}")
+    n = len(arrays["hand"])
+    for name, arr in arrays.items():
+        if len(arr) != n:
+            raise DatasetError(f"{path}: {name} has {len(arr)} rows, hand has {n}")
+    return GraspArrays(split, arrays, meta)
+
+
+class GraspDataset(Dataset):
+    """Validated functional grasps of one split as tensors, optionally for some hands only.
+
+    An item: instruction text, hand name, category and seed (to regenerate the object), wrist
+    (7), padded joints of the three phases with their DoF mask, anchors (4, 3), voted part,
+    metrics (see METRICS)."""
+
+    def __init__(self, root: str | Path, split: str = "train", hands: list[str] | None = None):
+        self.data = load_split(root, split)
+        keep = np.ones(len(self.data), dtype=bool)
+        if hands is not None:
+            table = self.data.meta["hands"]
+            unknown = set(hands) - set(table)
+            if unknown:
+                raise DatasetError(f"hands {sorted(unknown)} not in the dataset ({table})")
+            wanted = [table.index(h) for h in hands]
+            keep = np.isin(self.data.arrays["hand"], wanted)
+        self.rows = np.flatnonzero(keep)
+
+    def __len__(self) -> int:
+        return len(self.rows)
+
+    def __getitem__(self, i: int) -> dict[str, Any]:
+        r = int(self.rows[i])
+        a, meta = self.data.arrays, self.data.meta
+        item: dict[str, Any] = {
+            "instruction": meta["instructions"][a["instruction"][r]],
+            "hand": meta["hands"][a["hand"][r]],
+            "category": meta["categories"][a["category"][r]],
+            "seed": int(a["seed"][r]),
+            "part": meta["parts"][a["part"][r]],
+            "intent": meta["intents"][a["intent"][r]],
+            "hand_index": int(a["hand"][r]),
+        }
+        for key in ("wrist", "q_grasp", "q_pregrasp", "q_squeeze", "anchors", "metrics"):
+            item[key] = torch.from_numpy(a[key][r].astype(np.float32))
+        item["dof_mask"] = torch.from_numpy(a["dof_mask"][r].copy())
+        return item
+
+
+def dataset_info(root: str | Path) -> dict[str, Any]:
+    """Counts of grasps per split, hand, category, intent and source (and per split x hand)."""
+    meta = read_meta(root)
+    info: dict[str, Any] = {
+        "root": str(root),
+        "format": FORMAT,
+        "total": 0,
+        "splits": {},
+        "hands": Counter(),
+        "categories": Counter(),
+        "intents": Counter(),
+        "sources": Counter(),
+        "split_hands": {},
+    }
+    for split in SPLIT_NAMES:
+        data = load_split(root, split)
+        info["splits"][split] = len(data)
+        info["total"] += len(data)
+        info["hands"].update(data.names("hands", "hand"))
+        info["categories"].update(data.names("categories", "category"))
+        info["intents"].update(data.names("intents", "intent"))
+        info["sources"].update(SOURCES[s] for s in data.arrays["source"])
+        info["split_hands"][split] = dict(sorted(Counter(data.names("hands", "hand")).items()))
+    for key in ("hands", "categories", "intents", "sources"):
+        order = meta[key] if key in meta else SOURCES
+        info[key] = {name: info[key].get(name, 0) for name in order}
+    info["generator"] = meta.get("generator", {})
+    return info

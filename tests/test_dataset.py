@@ -1,0 +1,140 @@
+"""Dataset: compaction of batch shards, the torch loader, `dataset info`, the card."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from learned.dataset import DatasetError, GraspDataset, dataset_info, load_split
+from models.hands import load_hand
+from models.objects import split_of
+from planner import cli
+from planner.batch import make_jobs, read_results, run_batch
+from planner.batch.dataset import compact
+from tests.batch_fakes import fake_grasp_solve
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory):
+    """A tiny set from fake grasps: 2 hands, mug + teapot (held out), 4 variants per pair."""
+    root = tmp_path_factory.mktemp("ds")
+    jobs = make_jobs(
+        hands=["allegro", "shadow"],
+        splits=["train", "val", "test", "heldout"],
+        category_names=["mug", "teapot"],
+        objects_per_category=10,
+        variants=4,
+    )
+    run_batch(jobs, root / "plan", job_fn=fake_grasp_solve, progress=False)
+    info = compact([root / "plan"], root / "data", command="drograsp dataset generate X")
+    return root, jobs, info
+
+
+def test_compaction_keeps_valid_unique_grasps_by_split(tiny):
+    root, jobs, info = tiny
+    records = list(read_results(root / "plan"))
+    # variant 2 slips, variant 3 duplicates variant 0: two grasps kept per (object, instr, hand)
+    assert info["total"] == len(jobs) // 2
+    expected = {s: 0 for s in ("train", "val", "test", "heldout")}
+    for job in jobs:
+        if job.variant in (0, 1):
+            expected[split_of(job.object["category"], job.object["seed"])] += 1
+    assert info["splits"] == expected
+    assert expected["val"] and expected["test"] and expected["heldout"]
+    assert info["hands"] == {"allegro": len(jobs) // 4, "shadow": len(jobs) // 4}
+    assert info["sources"] == {"plan": len(jobs) // 2, "transfer": 0}
+    # each row carries its record's grasp
+    data = load_split(root / "data", "train")
+    row = 0
+    hand = data.names("hands", "hand")[row]
+    seed, instr = int(data.arrays["seed"][row]), data.names("instructions")[row]
+    cat = data.names("categories", "category")[row]
+    match = next(
+        r
+        for r in records
+        if r["job"]["hand"] == hand
+        and r["job"]["object"] == {"category": cat, "seed": seed}
+        and r["job"]["instruction"] == instr
+        and r["job"]["variant"] == data.arrays["variant"][row]
+    )
+    dof = load_hand(hand).dof
+    assert data.arrays["dof_mask"][row].sum() == dof
+    np.testing.assert_allclose(
+        data.arrays["q_grasp"][row, :dof], match["grasp"]["grasp"], atol=1e-6
+    )
+    assert not data.arrays["q_grasp"][row, dof:].any()
+    np.testing.assert_allclose(
+        data.arrays["wrist"][row],
+        match["grasp"]["wrist_pos"] + match["grasp"]["wrist_quat"],
+        atol=1e-6,
+    )
+
+
+def test_loader_items(tiny):
+    root, _, info = tiny
+    ds = GraspDataset(root / "data", "train")
+    assert len(ds) == info["splits"]["train"]
+    item = ds[0]
+    assert item["wrist"].shape == (7,) and item["anchors"].shape == (4, 3)
+    assert item["q_grasp"].shape == item["dof_mask"].shape == (load_hand("shadow").dof,)
+    assert item["dof_mask"].sum() == load_hand(item["hand"]).dof
+    assert item["instruction"].startswith(item["intent"]) and item["part"] in item["instruction"]
+    batch = next(iter(torch.utils.data.DataLoader(ds, batch_size=4)))
+    assert batch["q_squeeze"].shape == (4, load_hand("shadow").dof)
+    only = GraspDataset(root / "data", "train", hands=["allegro"])
+    assert {only[i]["hand"] for i in range(len(only))} == {"allegro"}
+    with pytest.raises(DatasetError, match="not in the dataset"):
+        GraspDataset(root / "data", "train", hands=["leap"])
+    with pytest.raises(DatasetError, match="no dataset here"):
+        GraspDataset(root, "train")
+
+
+def test_card_matches_the_data(tiny):
+    root, jobs, info = tiny
+    card = (root / "data" / "card.md").read_text()
+    assert f"{info['total']} validated functional grasps" in card
+    for split, n in info["splits"].items():
+        assert f"| {split} | {n} |" in card
+    for intent, n in info["intents"].items():
+        assert f"| {intent} | {n} |" in card
+    n_plan = sum(j.hand == "allegro" for j in jobs)
+    assert f"| plan:allegro | {n_plan} | 0 | {3 * n_plan // 4} |" in card
+    assert "drograsp dataset generate X" in card
+    assert "2.00 grasps per group" in card
+
+
+def test_dataset_info_command(tiny, capsys):
+    root, _, info = tiny
+    saved = cli.COMMANDS
+    cli.COMMANDS = tuple(dict.fromkeys((*saved, "dataset")))
+    try:
+        assert cli.main(["dataset", "info", str(root / "data"), "--json"]) == 0
+        printed = json.loads(capsys.readouterr().out)
+        assert printed["splits"] == info["splits"] and printed["intents"] == info["intents"]
+        assert cli.main(["dataset", "info", str(root)]) == 2
+    finally:
+        cli.COMMANDS = saved
+    assert dataset_info(root / "data") == printed
+
+
+def test_generate_a_tiny_real_dataset(tmp_path):
+    from planner.batch.generate import GenerateSettings, generate_dataset
+
+    settings = GenerateSettings(
+        hands=["allegro", "shadow"],
+        splits=["train"],
+        category_names=["mug"],
+        objects_per_category=1,
+        variants=1,
+        max_candidates=2,
+        progress=False,
+    )
+    info = generate_dataset(tmp_path / "ds", settings)
+    assert info["total"] >= 1
+    again = generate_dataset(tmp_path / "ds", settings)  # resumes: nothing to run
+    assert again == info
+    ds = GraspDataset(tmp_path / "ds", "train")
+    assert ds[0]["metrics"][2] < 0.05  # held within 5 cm
