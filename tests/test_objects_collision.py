@@ -104,6 +104,7 @@ def test_reference_meshes_load_fast():
 
 
 @pytest.mark.slow
+@pytest.mark.coacd  # 2-3 minutes of CoACD per real scan on this CPU: too long for CI
 @pytest.mark.parametrize("index", range(15))
 def test_reference_mesh_gets_coacd_pieces(index):
     meshes = _reference_meshes()

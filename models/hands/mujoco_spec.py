@@ -25,13 +25,17 @@ def hand_spec(hand) -> mujoco.MjSpec:
     root = spec.body(hand.root_link)
     root.add_freejoint(name=WRIST_JOINT)
     spec.worldbody.add_body(name=WRIST_MOCAP, mocap=True)
-    spec.add_equality(
+    weld = spec.add_equality(
         name=WRIST_WELD,
         type=mujoco.mjtEq.mjEQ_WELD,
         objtype=mujoco.mjtObj.mjOBJ_BODY,
         name1=hand.root_link,
         name2=WRIST_MOCAP,
     )
+    # MJCF's weld defaults (anchor 0, relative pose from qpos0, torque scale 1); the spec API
+    # would otherwise put the anchor at (0, 1, 0)
+    weld.data[:] = 0.0
+    weld.data[10] = 1.0
     meta = hand.meta
     for joint in hand.joint_names:
         spec_joint = spec.joint(joint)
