@@ -1,0 +1,150 @@
+"""The functional planner end to end: proposals, Drake, MuJoCo, part voting, CLI, viewer."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from models.errors import InstructionError, PlanningError
+from models.grasp import Grasp
+from models.objects import load_object, make_object
+from planner import plan_grasp
+from planner.functional import FunctionalPlanner
+from planner.labels import voted_part
+
+
+def test_planned_mug_grasp_holds_and_touches_the_body(hand_name):
+    result = plan_grasp(make_object("mug", 3), "Hold a mug by body", hand_name)
+    assert result.success, [c.summary() for c in result.candidates]
+    assert result.part_touched == "body"
+    grasp = result.grasp
+    assert grasp.hand == hand_name and grasp.anchors.shape == (4, 3)
+    assert grasp.metrics["validation"]["success"]
+
+
+def test_moved_grasp_no_longer_holds():
+    from planner.validation import validate
+
+    obj = make_object("mug", 3)
+    result = plan_grasp(obj, "Hold a mug by body", "allegro")
+    assert result.success
+    pieces = obj.collision_pieces()
+    assert not validate(result.grasp.moved([0.05, 0, 0]), pieces, "allegro", "paper").success
+    light = Grasp.from_dict({**result.grasp.to_dict(), "squeeze": result.grasp.grasp.tolist()})
+    assert not validate(light, pieces, "allegro", "paper").success
+
+
+def test_voting_rule_majority_and_far_fingertips():
+    points = np.array([[0, 0, 0], [0.1, 0, 0]], dtype=float)
+    labels = np.array([0, 1])
+    tips = np.array([[0.01, 0, 0], [0.09, 0, 0], [0.11, 0, 0], [0.3, 0, 0]])
+    # the last tip is 20 cm away: it votes for the part with the nearest centroid (1)
+    assert voted_part(tips, points, labels, ("a", "b")) == "b"
+
+
+def test_bad_instructions_are_clear_errors():
+    mug = make_object("mug", 3)
+    with pytest.raises(InstructionError, match="empty"):
+        plan_grasp(mug, "  ", "allegro")
+    with pytest.raises(InstructionError, match="body, handle"):
+        plan_grasp(mug, "Use a mug by spout", "allegro")
+
+
+def test_unlabelled_cloud_is_a_clear_error():
+    cloud = make_object("mug", 3).sample_cloud(2048).points
+    with pytest.raises(PlanningError, match="no part labels"):
+        FunctionalPlanner("allegro").plan(load_object(cloud), "Use a mug by handle")
+
+
+def _cli(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "planner.cli", *args], capture_output=True, text=True, timeout=600
+    )
+
+
+def test_cli_plan_writes_a_grasp_and_view_writes_a_page(tmp_path):
+    out = tmp_path / "g.json"
+    run = _cli(
+        "plan",
+        "--object",
+        "mug",
+        "--seed",
+        "3",
+        "--text",
+        "Hold a mug by body",
+        "--hand",
+        "shadow",
+        "--out",
+        str(out),
+    )
+    assert run.returncode == 0, run.stderr
+    assert "part touched: body" in run.stdout
+    grasp = Grasp.load(out)
+    assert grasp.metrics["object"] == {"category": "mug", "seed": 3}
+    page = tmp_path / "g.html"
+    view = _cli("view", str(out), "--html", str(page))
+    assert view.returncode == 0, view.stderr
+    assert page.stat().st_size > 100_000
+
+
+def test_cli_plan_reports_no_grasp_with_nonzero_exit():
+    run = _cli(
+        "plan", "--object", "mug", "--seed", "3", "--text", "Use a mug by spout", "--hand", "leap"
+    )
+    assert run.returncode == 2
+    assert "spout" in run.stderr and "Traceback" not in run.stderr
+
+
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason="Chromium is not installed (apt-get install chromium)")
+def test_viewer_page_renders_in_headless_chromium(tmp_path):
+    from PIL import Image
+
+    from models.hands import load_hand
+    from planner.viewer import write_html
+
+    obj = make_object("mug", 3)
+    result = plan_grasp(obj, "Hold a mug by body", "allegro")
+    page = write_html(result.grasp, obj, load_hand("allegro"), tmp_path / "g.html")
+    shot = tmp_path / "shot.png"
+    subprocess.run(
+        [
+            CHROMIUM,
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--no-first-run",
+            "--disable-background-networking",
+            "--disable-component-update",
+            "--disable-sync",
+            f"--user-data-dir={tmp_path / 'profile'}",
+            "--window-size=800,600",
+            "--virtual-time-budget=4000",
+            f"--screenshot={shot}",
+            page.as_uri(),
+        ],
+        capture_output=True,
+        timeout=120,
+        check=True,
+    )
+    pixels = np.asarray(Image.open(shot).convert("RGB"), dtype=float)
+    # a blank page is one flat colour; the scene has a background gradient, the dark hand and
+    # the coloured object parts
+    assert pixels.std() > 10
+    orange = (pixels[..., 0] > 180) & (pixels[..., 1] > 80) & (pixels[..., 2] < 80)
+    dark = pixels.max(axis=2) < 90
+    assert orange.sum() > 200 and dark.sum() > 200
+
+
+def test_demo_lists_every_hand(tmp_path):
+    run = _cli("demo", "--out", str(tmp_path), "--hands", "allegro")
+    assert "allegro" in run.stdout and "Use a mug by handle" in run.stdout
+    assert (tmp_path / "index.html").exists()
+    assert json.loads((tmp_path / "allegro_bottle_1.json").read_text())["hand"] == "allegro"
