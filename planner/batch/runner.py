@@ -147,7 +147,9 @@ def run_batch(
     bar = _progress(len(jobs), len(jobs) - len(todo), progress)
     try:
         stream: Iterator[tuple[int, dict]]
-        if backend == "ray":
+        if not todo:
+            stream = iter(())
+        elif backend == "ray":
             stream = run_ray(job_fn, todo, workers, ray_address)
         elif backend == "pool":
             stream = run_pool(job_fn, todo, min(workers, max(len(todo), 1)))

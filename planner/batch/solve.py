@@ -7,6 +7,7 @@ arrive ordered by (object, hand), so Drake programs and MuJoCo scenes are built 
 
 from __future__ import annotations
 
+import json
 from functools import lru_cache
 from typing import Any
 
@@ -52,14 +53,10 @@ def _strip_measured(validation: dict[str, Any] | None, times: dict[str, float]) 
 
 @lru_cache(maxsize=8)
 def cached_object(key: str) -> ObjectModel:
-    import json
-
     return resolve_object(json.loads(key))
 
 
 def job_object(job: Job) -> ObjectModel:
-    import json
-
     return cached_object(json.dumps(job.object, sort_keys=True))
 
 
@@ -70,7 +67,7 @@ def cached_planner(hand: str, max_candidates: int, protocol: str, variant: int) 
     )
 
 
-def _grasp_record(grasp: Grasp | None, times: dict[str, float]) -> dict[str, Any] | None:
+def _grasp_record(grasp: Grasp | None) -> dict[str, Any] | None:
     if grasp is None:
         return None
     data = grasp.to_dict()
@@ -104,7 +101,7 @@ def solve_job(job: Job) -> dict[str, Any]:
         "anchor_error": None if best is None else float(best.solve.anchor_error),
         "min_distance": None if best is None else float(best.solve.min_distance),
         "validation": jsonable(validation),
-        "grasp": _grasp_record(result.grasp, times),
+        "grasp": _grasp_record(result.grasp),
         "notes": list(result.notes),
         "times": times,
     }
@@ -126,7 +123,7 @@ def _transfer(job: Job, obj: ObjectModel, part: str, times: dict[str, float]) ->
         "anchor_error": float(done.solve.anchor_error),
         "min_distance": float(done.solve.min_distance),
         "validation": jsonable(validation),
-        "grasp": _grasp_record(done.grasp, times),
+        "grasp": _grasp_record(done.grasp),
         "notes": [] if done.solve.ok else [f"transfer solve rejected: {done.solve.message}"],
         "times": times,
     }
