@@ -72,7 +72,7 @@ def run_pair(args: tuple[str, str, int, str, int]) -> PairRecord:
             hand, cat, seed, text, part, False, False, False, False, 0, [], 0.0, repr(err)
         )
     elapsed = time.perf_counter() - start
-    first = result.candidates[0] if result.candidates else None
+    first = next((c for c in result.candidates if c.order == 0), None)  # the planner's top pick
     return PairRecord(
         hand=hand,
         category=cat,

@@ -5,7 +5,8 @@ instructed part's points are analysed (principal axes), the thumb is put on one 
 part and the three other anchor fingers on the opposite side, spread along the part's long
 axis at the hand's own finger spacing, and the palm faces the part from the side with the
 most free space. Each proposal goes through the Drake grasp program and MuJoCo validation;
-the first grasp that holds and touches the instructed part is returned with every candidate's
+solved candidates are validated best first (force-closure quality of their contacts), and the
+first grasp that holds and touches the instructed part is returned with every candidate's
 outcome.
 """
 
@@ -26,7 +27,8 @@ from models.grasp import Grasp
 from models.hands import HandModel, load_hand
 from models.objects import Instruction, ObjectModel, load_object, parse_instruction
 from planner.grasp_program import GraspTargets, ProgramSettings, SolveResult, grasp_program
-from planner.labels import nearest_points, voted_part
+from planner.labels import voted_part
+from planner.quality import epsilon_quality
 from planner.validation import validate
 
 
@@ -37,6 +39,7 @@ class PlannerSettings:
     approach_clearance: float = 0.06  # m from the anchors' centre to test the palm's free space
     palm_margin: float = 0.004  # m between the palm target and the part's near surface
     use_palm: bool = True
+    contact_distance: float = 0.006  # m: hand geometry this close to the object counts as contact
     program: ProgramSettings = field(default_factory=ProgramSettings)
 
 
@@ -59,6 +62,8 @@ class CandidateResult:
     success: bool = False
     part: str | None = None
     validation: dict[str, Any] | None = None
+    quality: float = -1.0  # epsilon (force-closure) quality of the solved contacts
+    order: int | None = None  # position in the validation order, if validated
     times: dict[str, float] = field(default_factory=dict)
 
     def summary(self) -> dict[str, Any]:
@@ -68,6 +73,8 @@ class CandidateResult:
             "solve_message": self.solve.message,
             "success": self.success,
             "part": self.part,
+            "quality": self.quality,
+            "validated_as": self.order,
             "anchor_error_mm": 1000 * self.solve.anchor_error,
             "min_distance_mm": 1000 * self.solve.min_distance,
             "times": self.times,
@@ -110,8 +117,10 @@ class PlanResult:
             "part_instructed": self.instruction.part,
             "part_touched": self.part_touched,
             "anchor_error_mm": None if best is None else 1000 * best.solve.anchor_error,
-            "candidates_tried": len(self.candidates),
+            "candidates_solved": len(self.candidates),
+            "candidates_validated": sum(c.order is not None for c in self.candidates),
             "chosen_rank": None if best is None else best.rank,
+            "chosen_validated_as": None if best is None else best.order,
             "times_s": self.stage_times(),
             "notes": self.notes,
         }
@@ -245,14 +254,14 @@ class FunctionalPlanner:
         build = time.perf_counter() - start
         proposals = self.propose(obj, part)
         propose_time = time.perf_counter() - start - build
-        candidates: list[CandidateResult] = []
+        candidates = [self._solve(program, obj, rank, p) for rank, p in enumerate(proposals)]
+        candidates[0].times.update(build=build, propose=propose_time)
+        # validate the solved candidates best first: force closure (epsilon), then proposal rank
+        order = sorted((c for c in candidates if c.solve.ok), key=lambda c: (-c.quality, c.rank))
         fallback = None
-        for rank, proposal in enumerate(proposals):
-            cand = self._try(program, obj, instruction, rank, proposal)
-            if rank == 0:
-                cand.times["build"] = build
-                cand.times["propose"] = propose_time
-            candidates.append(cand)
+        for position, cand in enumerate(order):
+            cand.order = position
+            self._validate(program, obj, instruction, cand)
             if cand.success and cand.part == part:
                 return PlanResult(instruction, self.hand.name, cand.grasp, candidates, notes)
             if cand.success and fallback is None:
@@ -264,8 +273,8 @@ class FunctionalPlanner:
             return PlanResult(instruction, self.hand.name, fallback.grasp, candidates, notes)
         return PlanResult(instruction, self.hand.name, None, candidates, notes)
 
-    def _try(self, program, obj, instruction, rank, proposal) -> CandidateResult:
-        t0 = time.perf_counter()
+    def _solve(self, program, obj, rank, proposal) -> CandidateResult:
+        """Solve one proposal and score its contacts (epsilon quality at the grasp)."""
         solved = program.solve(
             GraspTargets(
                 proposal.wrist,
@@ -276,8 +285,18 @@ class FunctionalPlanner:
             )
         )
         cand = CandidateResult(rank, proposal, solved, times={"solve": solved.solve_time})
-        if not solved.ok:
-            return cand
+        if solved.ok:
+            t0 = time.perf_counter()
+            points, inward = program.contacts(
+                solved.wrist, solved.q, self.settings.contact_distance
+            )
+            cand.quality = epsilon_quality(points, inward, obj.points.mean(axis=0))
+            cand.times["quality"] = time.perf_counter() - t0
+        return cand
+
+    def _validate(self, program, obj, instruction, cand: CandidateResult) -> None:
+        """Pregrasp, squeeze, the Grasp record, MuJoCo validation and the voted part."""
+        solved = cand.solve
         t1 = time.perf_counter()
         hand = self.hand
         names = list(hand.meta.anchor_fingers)
@@ -294,7 +313,7 @@ class FunctionalPlanner:
             pregrasp=pre,
             squeeze=squeeze,
             joint_names=tuple(hand.joint_names),
-            anchors=nearest_points(tips, obj.points),
+            anchors=obj.points[nearest],
             instruction=instruction.text,
         )
         t2 = time.perf_counter()
@@ -310,12 +329,12 @@ class FunctionalPlanner:
                 "part": cand.part,
                 "anchor_error": solved.anchor_error,
                 "min_distance": solved.min_distance,
+                "epsilon": cand.quality,
                 "validation": cand.validation,
             }
         )
         cand.grasp = grasp
-        cand.times.update({"pregrasp": t2 - t1, "validate": t3 - t2, "total": t3 - t0})
-        return cand
+        cand.times.update({"pregrasp": t2 - t1, "validate": t3 - t2})
 
 
 def plan_grasp(

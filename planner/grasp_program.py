@@ -166,6 +166,29 @@ class GraspProgram:
             best = min(best, pair.distance)
         return float(best)
 
+    def contacts(
+        self, wrist: np.ndarray, q: np.ndarray, threshold: float = 0.003
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Object-side points where the hand is within `threshold`, with the normals pointing
+        into the object (the direction the hand can push): one per touching hand geometry."""
+        self.set_configuration(wrist, q)
+        query = self.plant.get_geometry_query_input_port().Eval(self.plant_context)
+        points, normals = [], []
+        for pair in query.ComputeSignedDistancePairwiseClosestPoints(threshold):
+            a_hand, b_hand = pair.id_A in self._hand_geoms, pair.id_B in self._hand_geoms
+            if a_hand == b_hand:
+                continue
+            # nhat_BA_W points from B toward A; world-anchored object pieces have identity pose
+            obj_id, p_obj, n_into = (
+                (pair.id_B, pair.p_BCb, -pair.nhat_BA_W)
+                if a_hand
+                else (pair.id_A, pair.p_ACa, pair.nhat_BA_W)
+            )
+            pose = self._inspector.GetPoseInFrame(obj_id)
+            points.append(pose.multiply(p_obj))
+            normals.append(n_into)
+        return np.asarray(points).reshape(-1, 3), np.asarray(normals).reshape(-1, 3)
+
     def anchor_error(self, wrist: np.ndarray, q: np.ndarray, anchors: np.ndarray) -> float:
         self.set_configuration(wrist, q)
         worst = 0.0

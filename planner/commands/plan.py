@@ -53,7 +53,10 @@ def print_summary(result: PlanResult) -> None:
     print(f"  part touched: {s['part_touched']} (instructed: {s['part_instructed']})")
     if s["anchor_error_mm"] is not None:
         print(f"  anchor error: {s['anchor_error_mm']:.1f} mm")
-    print(f"  candidates tried: {s['candidates_tried']}, chosen: {s['chosen_rank']}")
+    print(
+        f"  candidates: {s['candidates_solved']} solved, {s['candidates_validated']} validated; "
+        f"chosen: proposal {s['chosen_rank']}, validated as #{s['chosen_validated_as']}"
+    )
     times = ", ".join(f"{k} {v:.2f} s" for k, v in s["times_s"].items())
     print(f"  time per stage: {times}")
     for note in s["notes"]:
@@ -70,7 +73,8 @@ def run(args: argparse.Namespace) -> int:
         print_summary(result)
     if result.grasp is None:
         tried = "; ".join(
-            f"#{c.rank}: {c.solve.message or ('held' if c.success else 'slipped in validation')}"
+            f"#{c.rank}: "
+            + (c.solve.message or ("slipped in validation" if c.order is not None else "not tried"))
             for c in result.candidates
         )
         raise DrograspError(f"no grasp found for {args.text!r} with {args.hand} ({tried})")
