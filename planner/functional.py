@@ -39,6 +39,7 @@ class PlannerSettings:
     approach_clearance: float = 0.06  # m from the anchors' centre to test the palm's free space
     palm_margin: float = 0.004  # m between the palm target and the part's near surface
     use_palm: bool = True
+    solve_batch: int = 4  # proposals solved before the best of them are validated
     contact_distance: float = 0.006  # m: hand geometry this close to the object counts as contact
     program: ProgramSettings = field(default_factory=ProgramSettings)
 
@@ -254,18 +255,29 @@ class FunctionalPlanner:
         build = time.perf_counter() - start
         proposals = self.propose(obj, part)
         propose_time = time.perf_counter() - start - build
-        candidates = [self._solve(program, obj, rank, p) for rank, p in enumerate(proposals)]
-        candidates[0].times.update(build=build, propose=propose_time)
-        # validate the solved candidates best first: force closure (epsilon), then proposal rank
-        order = sorted((c for c in candidates if c.solve.ok), key=lambda c: (-c.quality, c.rank))
+        # solve proposals a batch at a time; validate each batch's solved candidates best
+        # first by force-closure quality, so good grasps are found without solving them all
+        candidates: list[CandidateResult] = []
         fallback = None
-        for position, cand in enumerate(order):
-            cand.order = position
-            self._validate(program, obj, instruction, cand)
-            if cand.success and cand.part == part:
-                return PlanResult(instruction, self.hand.name, cand.grasp, candidates, notes)
-            if cand.success and fallback is None:
-                fallback = cand
+        position = 0
+        batch = self.settings.solve_batch
+        for first in range(0, len(proposals), batch):
+            solved = [
+                self._solve(program, obj, first + i, p)
+                for i, p in enumerate(proposals[first : first + batch])
+            ]
+            if first == 0:
+                solved[0].times.update(build=build, propose=propose_time)
+            candidates.extend(solved)
+            order = sorted((c for c in solved if c.solve.ok), key=lambda c: (-c.quality, c.rank))
+            for cand in order:
+                cand.order = position
+                position += 1
+                self._validate(program, obj, instruction, cand)
+                if cand.success and cand.part == part:
+                    return PlanResult(instruction, self.hand.name, cand.grasp, candidates, notes)
+                if cand.success and fallback is None:
+                    fallback = cand
         if fallback is not None:
             notes.append(
                 f"no holding grasp touched the {part}; returning one that touches {fallback.part}"

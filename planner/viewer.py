@@ -106,7 +106,7 @@ def build_scene(meshcat: Meshcat, grasp: Grasp, obj: ObjectModel, hand: HandMode
     pose_hand(meshcat, hand, _link_poses(hand, grasp, "grasp"))
     centre = obj.points.mean(axis=0)
     extent = float(np.linalg.norm(obj.extents))
-    meshcat.SetCameraPose(centre + np.array([1.2, -1.6, 1.0]) * max(extent, 0.15), centre)
+    meshcat.SetCameraPose(centre + np.array([0.7, -0.9, 0.6]) * max(extent, 0.15), centre)
 
 
 def _interpolated(hand: HandModel, grasp: Grasp, phase: float) -> np.ndarray:
