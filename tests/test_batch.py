@@ -190,13 +190,15 @@ def test_variants_rotate_the_ranked_proposals():
     ranked = base.propose(obj, "body")
     shifted = VariantPlanner("allegro", PlannerSettings(max_candidates=3), variant=2)
     got = shifted.propose(obj, "body")
-    assert len(got) == 3
-    for p, q in zip(got, ranked[2:5], strict=True):
+    assert len(got) == 3  # the third window of 3: ranked proposals 6, 7, 8
+    for p, q in zip(got, ranked[6:9], strict=True):
         assert (p.wrist == q.wrist).all() and (p.anchors == q.anchors).all()
-    assert shifted.proposal_index(0) == 2
-    wrapped = VariantPlanner("allegro", PlannerSettings(max_candidates=2), variant=len(ranked) - 1)
+    assert shifted.proposal_index(0) == 6
+    wrapped = VariantPlanner("allegro", PlannerSettings(max_candidates=1), variant=len(ranked) - 1)
+    assert (wrapped.propose(obj, "body")[0].wrist == ranked[-1].wrist).all()
+    wrapped = VariantPlanner("allegro", PlannerSettings(max_candidates=2), variant=len(ranked) // 2)
     wrapped.propose(obj, "body")
-    assert wrapped.proposal_index(1) == 0
+    assert wrapped.proposal_index(1) == 1  # window wrapped to the start
 
 
 def test_real_planner_and_transfer_jobs(tmp_path):

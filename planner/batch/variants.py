@@ -1,8 +1,9 @@
 """Varied wrist poses for one (object, instruction, hand): rotate the planner's proposals.
 
-FunctionalPlanner ranks a fixed set of proposals (wrist pose + anchors) and returns the first
-that holds. Variant k starts the same search at the k-th ranked proposal (wrapping around), so
-variants give different grasps where several proposals hold and the same search otherwise.
+FunctionalPlanner ranks a fixed set of proposals (wrist pose + anchors) and plans with the first
+`max_candidates` of them. Variant k gives it the next window instead: ranked proposals from
+k x max_candidates on (wrapping around), so variants 0, 1, ... search disjoint windows while
+there are proposals left, and give different wrist poses wherever a window holds a grasp.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ ALL_PROPOSALS = sys.maxsize
 
 
 class VariantPlanner(FunctionalPlanner):
-    """A FunctionalPlanner whose proposals start at ranked proposal `variant`.
+    """A FunctionalPlanner whose proposals start at ranked proposal `variant x max_candidates`.
 
     `max_candidates` proposals are still tried; `proposal_index(rank)` maps a candidate's rank
     in this planner back to its position in the full ranking (what a dataset records)."""
@@ -36,9 +37,13 @@ class VariantPlanner(FunctionalPlanner):
     def propose(self, obj: ObjectModel, part: str) -> list[Proposal]:
         ranked = self._ranker.propose(obj, part)
         self._count = len(ranked)
-        k = self.variant % max(len(ranked), 1)
+        k = self.offset % max(len(ranked), 1)
         return (ranked[k:] + ranked[:k])[: self.settings.max_candidates]
 
     def proposal_index(self, rank: int) -> int:
         """Position in the full ranking of the candidate tried `rank`-th (after `propose`)."""
-        return (rank + self.variant) % max(self._count, 1)
+        return (rank + self.offset) % max(self._count, 1)
+
+    @property
+    def offset(self) -> int:
+        return self.variant * self.settings.max_candidates
