@@ -14,7 +14,17 @@ import sys
 from models.errors import DrograspError
 
 # Order is the order shown in `drograsp --help`.
-COMMANDS: tuple[str, ...] = ("demo", "plan", "view", "validate", "hands", "objects")
+COMMANDS: tuple[str, ...] = (
+    "demo",
+    "plan",
+    "view",
+    "validate",
+    "hands",
+    "objects",
+    "jobs",
+    "batch",
+    "dataset",
+)
 
 
 def build_parser() -> argparse.ArgumentParser:

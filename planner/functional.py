@@ -34,7 +34,8 @@ from planner.validation import validate
 
 @dataclass(frozen=True)
 class PlannerSettings:
-    max_candidates: int = 8
+    max_candidates: int = 8  # grasps validated at most (the costly step)
+    max_proposals: int = 16  # wrist poses + anchors solved at most
     protocol: str = "paper"
     approach_clearance: float = 0.06  # m from the anchors' centre to test the palm's free space
     palm_margin: float = 0.004  # m between the palm target and the part's near surface
@@ -191,7 +192,7 @@ class FunctionalPlanner:
                 u = rot.apply(geo.opposition)  # thumb -> fingers, in the world
                 proposals.append(self._proposal(pts, nrm, t, centre, rot, u, v, e1, spacing, tree))
         proposals.sort(key=lambda p: -p.score)
-        return proposals[: self.settings.max_candidates]
+        return proposals[: self.settings.max_proposals]
 
     def _proposal(self, pts, nrm, t, centre, rot, u, v, e1, spacing, tree) -> Proposal:
         geo = self.geometry
@@ -262,6 +263,8 @@ class FunctionalPlanner:
         position = 0
         batch = self.settings.solve_batch
         for first in range(0, len(proposals), batch):
+            if position >= self.settings.max_candidates:
+                break
             solved = [
                 self._solve(program, obj, first + i, p)
                 for i, p in enumerate(proposals[first : first + batch])
@@ -271,6 +274,8 @@ class FunctionalPlanner:
             candidates.extend(solved)
             order = sorted((c for c in solved if c.solve.ok), key=lambda c: (-c.quality, c.rank))
             for cand in order:
+                if position >= self.settings.max_candidates:
+                    break
                 cand.order = position
                 position += 1
                 self._validate(program, obj, instruction, cand)

@@ -41,7 +41,7 @@ class ProgramSettings:
     wrist_rotation_weight: float = 0.01
     joint_prior_weight: float = 1e-4
     min_distance: float = 0.0005  # hand-object signed distance lower bound (m): about touching
-    influence_distance: float = 0.02
+    influence_distance: float = 0.01
     penetration_tolerance: float = 0.002  # accepted penetration when checking an answer (m)
     anchor_tolerance: float = 0.025  # accepted fingertip-surface to anchor distance (m)
     major_optimality: float = 1e-3

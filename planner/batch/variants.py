@@ -30,7 +30,7 @@ class VariantPlanner(FunctionalPlanner):
         super().__init__(hand, settings)
         self.variant = int(variant)
         self._ranker = FunctionalPlanner(
-            self.hand, replace(self.settings, max_candidates=ALL_PROPOSALS)
+            self.hand, replace(self.settings, max_proposals=ALL_PROPOSALS)
         )
         self._count = 0
 
@@ -38,7 +38,7 @@ class VariantPlanner(FunctionalPlanner):
         ranked = self._ranker.propose(obj, part)
         self._count = len(ranked)
         k = self.offset % max(len(ranked), 1)
-        return (ranked[k:] + ranked[:k])[: self.settings.max_candidates]
+        return (ranked[k:] + ranked[:k])[: self.settings.max_proposals]
 
     def proposal_index(self, rank: int) -> int:
         """Position in the full ranking of the candidate tried `rank`-th (after `propose`)."""
