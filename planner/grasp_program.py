@@ -184,6 +184,8 @@ class GraspProgram:
                 if a_hand
                 else (pair.id_A, pair.p_ACa, pair.nhat_BA_W)
             )
+            if not np.all(np.isfinite(n_into)):  # Drake's normal is undefined at exact touch
+                continue
             pose = self._inspector.GetPoseInFrame(obj_id)
             points.append(pose.multiply(p_obj))
             normals.append(n_into)
