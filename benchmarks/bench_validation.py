@@ -50,7 +50,8 @@ def main() -> None:
         cases.append((grasp, obj, rows["obj_pose"][i]))
 
     shared = get_protocol(args.preset)
-    separate = shared.replace(share_closing=False)
+    # DexGraspBench's way: the closing re-simulated per direction, every hold run to the end
+    separate = shared.replace(share_closing=False, rest_speed=0.0)
     for grasp, obj, pose in cases:  # compile every scene first
         validate(grasp, obj, hand, get_protocol(args.preset, hold_time=0.2), object_pose=pose)
 

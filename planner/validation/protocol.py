@@ -65,6 +65,10 @@ class Protocol:
     # Speed: simulate the closing once and copy it per direction; stop at the first failure.
     share_closing: bool = True
     all_directions: bool = False
+    # Speed: end a direction's hold early once the object and fingers have been at rest for two
+    # checks and, even moving at their current speed, could not leave the thresholds in the time
+    # left (under a constant force, a system at rest stays at rest). 0 disables it.
+    rest_speed: float = 0.002  # m/s of the object (and rad/s of fingers x 0.1 m)
 
     def __post_init__(self) -> None:
         positive = ("timestep", "impratio", "object_mass", "hold_time", "check_interval")

@@ -199,9 +199,11 @@ def _hold(
         protocol.force_scale * protocol.object_mass * direction
     )
     q = scene.object_qpos
+    dof = int(m.jnt_dofadr[m.body_jntadr[scene.object_body]])
     translation = rotation = 0.0
     held = True
     checks_done = 0
+    at_rest = 0
     for _ in range(protocol.checks):
         for _ in range(protocol.steps_per_check):
             mujoco.mj_step(m, data)
@@ -210,6 +212,19 @@ def _hold(
         if not (translation < protocol.max_translation and rotation < protocol.max_rotation_deg):
             held = False
             break
+        if protocol.rest_speed > 0:
+            speed = float(np.linalg.norm(data.qvel[dof : dof + 3]))
+            spin = float(np.linalg.norm(data.qvel[dof + 3 : dof + 6]))
+            fingers = float(np.abs(data.qvel[scene.joint_dof]).max(initial=0.0)) * 0.1
+            left = (protocol.checks - checks_done) * protocol.check_interval
+            resting = max(speed, spin * 0.1, fingers) < protocol.rest_speed
+            safe = (
+                translation + speed * left < 0.9 * protocol.max_translation
+                and rotation + np.degrees(spin) * left < 0.9 * protocol.max_rotation_deg
+            )
+            at_rest = at_rest + 1 if resting and safe else 0
+            if at_rest >= 2:
+                break
     hold_time = checks_done * protocol.steps_per_check * protocol.timestep
     return DirectionResult(
         tuple(float(x) for x in direction), translation, rotation, held, hold_time
