@@ -26,12 +26,6 @@ def comparable(out_dir: Path) -> list[dict]:
     return [{k: v for k, v in r.items() if k != "times"} for r in read_results(out_dir)]
 
 
-def with_commands(*names: str):
-    saved = cli.COMMANDS
-    cli.COMMANDS = tuple(dict.fromkeys((*saved, *names)))
-    return saved
-
-
 # ---------------------------------------------------------------------- jobs
 def test_make_jobs_counts_order_and_roundtrip(tmp_path):
     jobs = make_jobs(
@@ -121,10 +115,7 @@ def test_rerun_skips_finished_and_refuses_other_jobs(tmp_path):
 def test_killed_run_restarts_without_loss_or_duplicates(tmp_path):
     jobs_file = write_jobs(fake_jobs(24, {5: "Use a mug by raise"}), tmp_path / "jobs.jsonl")
     out = tmp_path / "out"
-    code = (
-        "import sys; from planner import cli; cli.COMMANDS += ('batch',); "
-        "sys.exit(cli.main(sys.argv[1:]))"
-    )
+    code = "import sys; from planner import cli; sys.exit(cli.main(sys.argv[1:]))"
     argv = [sys.executable, "-c", code, "batch", str(jobs_file), str(out), "--workers", "2"]
     argv += ["--shard-size", "2", "--job-fn", "tests.batch_fakes:fake_solve", "--no-progress"]
     env = dict(os.environ, BATCH_FAKE_SLEEP="0.25", PYTHONPATH=str(REPO))
@@ -216,7 +207,7 @@ def test_real_planner_and_transfer_jobs(tmp_path):
     assert good["validation"]["success"] and "wall_time" not in good["validation"]
     grasp = Grasp.from_dict(good["grasp"])
     assert grasp.hand == "allegro" and grasp.anchors.shape == (4, 3)
-    assert good["proposal"] == 0 and good["times"]["job"] > 0
+    assert good["proposal"] >= 0 and good["times"]["job"] > 0
     assert bad["error"]["type"] == "InstructionError"  # a mug has no spout
 
     tjobs = transfer_jobs(read_results(tmp_path / "plan"), ["allegro", "shadow"])
@@ -241,18 +232,14 @@ def test_hand_size_is_read_from_geometry():
 # ---------------------------------------------------------------------- CLI
 def test_cli_jobs_make_and_batch(tmp_path, capsys, monkeypatch):
     monkeypatch.setenv("BATCH_FAKE_SLEEP", "0")
-    saved = with_commands("jobs", "batch")
-    try:
-        jobs_file = tmp_path / "jobs.jsonl"
-        argv = ["jobs", "make", str(jobs_file), "--categories", "mug", "--hands", "leap"]
-        assert cli.main(argv + ["--objects-per-category", "2", "--variants", "1"]) == 0
-        jobs = read_jobs(jobs_file)
-        assert len(jobs) == 2 * 5 and {j.hand for j in jobs} == {"leap"}
-        argv = ["batch", str(jobs_file), str(tmp_path / "out"), "--no-progress", "--json"]
-        assert cli.main(argv + ["--job-fn", "tests.batch_fakes:fake_solve"]) == 0
-        assert cli.main(argv + ["--job-fn", "tests.batch_fakes:nothing"]) == 2
-    finally:
-        cli.COMMANDS = saved
+    jobs_file = tmp_path / "jobs.jsonl"
+    argv = ["jobs", "make", str(jobs_file), "--categories", "mug", "--hands", "leap"]
+    assert cli.main(argv + ["--objects-per-category", "2", "--variants", "1"]) == 0
+    jobs = read_jobs(jobs_file)
+    assert len(jobs) == 2 * 5 and {j.hand for j in jobs} == {"leap"}
+    argv = ["batch", str(jobs_file), str(tmp_path / "out"), "--no-progress", "--json"]
+    assert cli.main(argv + ["--job-fn", "tests.batch_fakes:fake_solve"]) == 0
+    assert cli.main(argv + ["--job-fn", "tests.batch_fakes:nothing"]) == 2
     out = capsys.readouterr()
     assert json.loads(out.out[out.out.index("{") :])["jobs"] == 10
     assert "cannot load job function" in out.err

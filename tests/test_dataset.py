@@ -108,15 +108,10 @@ def test_card_matches_the_data(tiny):
 
 def test_dataset_info_command(tiny, capsys):
     root, _, info = tiny
-    saved = cli.COMMANDS
-    cli.COMMANDS = tuple(dict.fromkeys((*saved, "dataset")))
-    try:
-        assert cli.main(["dataset", "info", str(root / "data"), "--json"]) == 0
-        printed = json.loads(capsys.readouterr().out)
-        assert printed["splits"] == info["splits"] and printed["intents"] == info["intents"]
-        assert cli.main(["dataset", "info", str(root)]) == 2
-    finally:
-        cli.COMMANDS = saved
+    assert cli.main(["dataset", "info", str(root / "data"), "--json"]) == 0
+    printed = json.loads(capsys.readouterr().out)
+    assert printed["splits"] == info["splits"] and printed["intents"] == info["intents"]
+    assert cli.main(["dataset", "info", str(root)]) == 2
     assert dataset_info(root / "data") == printed
 
 

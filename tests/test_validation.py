@@ -72,7 +72,12 @@ def test_reference_success_and_failure(rows, hand):
         assert result.wall_time > 0 and result.simulated_time > 0
         if result.success:
             assert len(result.directions) == 6 and all(d.held for d in result.directions)
-            assert result.simulated_time == pytest.approx(0.8 + 6 * 2.0)
+            # a resting object may end a hold early; never later than the full 2 s
+            assert 0.8 + 6 * 0.4 <= result.simulated_time <= 0.8 + 6 * 2.0 + 1e-9
+            full = validate(
+                grasp, obj, hand, get_protocol("dexgraspbench", rest_speed=0.0), object_pose=pose
+            )
+            assert full.success and full.simulated_time == pytest.approx(0.8 + 6 * 2.0)
         else:
             assert not result.directions[-1].held
 
@@ -204,12 +209,7 @@ def test_cli_reports_agreement(tmp_path, capsys):
         "--out",
         str(out),
     ]
-    saved = cli.COMMANDS
-    try:
-        cli.COMMANDS = tuple(dict.fromkeys((*saved, "validate")))
-        assert cli.main(argv) == 0
-    finally:
-        cli.COMMANDS = saved
+    assert cli.main(argv) == 0
     summary = json.loads(capsys.readouterr().out)
     assert summary["grasps"] == 2 and "agreement" in summary
     assert len(json.loads(out.read_text())["grasps"]) == 2

@@ -1,10 +1,13 @@
 """Validator on each built-in hand: a box grasp that holds passes, the same grasp moved 5 cm
-away fails, and squeeze = grasp (light contact) fails."""
+away fails, and squeeze = grasp (light contact) fails.
+
+The holding grasp comes from the model-based planner; it is not equally good on every box size
+for every hand, so the first of a few boxes that it grasps is used (the checks are about the
+validator's verdicts, the planner has its own benchmark)."""
 
 from __future__ import annotations
 
 import numpy as np
-import pytest
 import trimesh
 
 from models.grasp import Grasp
@@ -12,16 +15,22 @@ from models.objects.loading import from_mesh
 from planner.functional import FunctionalPlanner
 from planner.validation import validate
 
+BOXES = ([0.05, 0.05, 0.1], [0.04, 0.04, 0.1], [0.06, 0.04, 0.1])
 
-@pytest.fixture(scope="module")
-def box():
-    mesh = trimesh.creation.box(extents=[0.05, 0.05, 0.1])
+
+def _box(extents):
+    mesh = trimesh.creation.box(extents=extents)
     return from_mesh(mesh, "box", face_labels=np.zeros(len(mesh.faces), int), part_names=("body",))
 
 
-def test_box_grasp_holds_and_fails_when_moved_or_not_squeezed(hand_name, box):
-    result = FunctionalPlanner(hand_name).plan(box, "Hold a box by body")
-    assert result.success, [c.summary() for c in result.candidates]
+def test_box_grasp_holds_and_fails_when_moved_or_not_squeezed(hand_name):
+    planner = FunctionalPlanner(hand_name)
+    for extents in BOXES:
+        box = _box(extents)
+        result = planner.plan(box, "Hold a box by body")
+        if result.success:
+            break
+    assert result.success, f"no holding grasp on any of {BOXES}"
     grasp, pieces = result.grasp, box.collision_pieces()
     assert validate(grasp, pieces, hand_name, "paper").success
     assert not validate(grasp.moved([0.05, 0.0, 0.0]), pieces, hand_name, "paper").success

@@ -38,7 +38,7 @@ class VariantPlanner(FunctionalPlanner):
         ranked = self._ranker.propose(obj, part)
         self._count = len(ranked)
         k = self.offset % max(len(ranked), 1)
-        return (ranked[k:] + ranked[:k])[: self.settings.max_proposals]
+        return (ranked[k:] + ranked[:k])[: self.settings.max_candidates]
 
     def proposal_index(self, rank: int) -> int:
         """Position in the full ranking of the candidate tried `rank`-th (after `propose`)."""
