@@ -36,6 +36,7 @@ from planner.validation import validate
 class PlannerSettings:
     max_candidates: int = 8  # grasps validated at most (the costly step)
     max_proposals: int = 16  # wrist poses + anchors solved at most
+    approach_step_deg: float = 45.0  # approach directions around the part's long axis
     protocol: str = "paper"
     approach_clearance: float = 0.06  # m from the anchors' centre to test the palm's free space
     palm_margin: float = 0.004  # m between the palm target and the part's near surface
@@ -183,7 +184,7 @@ class FunctionalPlanner:
         spacing = min(geo.spacing, max((t.max() - t.min()) / 3, 0.005))
         tree = cKDTree(points)
         proposals = []
-        for theta in np.deg2rad(np.arange(0, 360, 45)):
+        for theta in np.deg2rad(np.arange(0, 360, self.settings.approach_step_deg)):
             v = np.cos(theta) * e2 + np.sin(theta) * e3  # palm -> object, across the long axis
             for lateral_sign in (1.0, -1.0):  # finger row along +e1 or -e1
                 rot, _ = Rotation.align_vectors(
