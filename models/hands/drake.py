@@ -1,13 +1,14 @@
 """Put a hand into a Drake MultibodyPlant with a floating wrist.
 
-Drake filters only parent-child collision pairs; the grasp program must not fight the
-hand's own geometry, so hand-hand pairs are filtered explicitly (all of them by default,
-or only the metadata's ignore list plus neighbours for self-collision checks).
+Drake filters only parent-child collision pairs. The hand.json ignore list (neighbours whose
+geometry overlaps by design) is always filtered; the other hand-hand pairs are filtered too
+unless `filter_self_collisions=False`. The grasp program keeps them: with every hand-hand pair
+filtered, solutions put fingers through each other and MuJoCo then pushes the object away.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from pydrake.common.eigen_geometry import Quaternion
@@ -16,14 +17,27 @@ from pydrake.math import RigidTransform
 from pydrake.multibody.parsing import Parser
 
 
-@dataclass
 class DrakeHand:
-    """Where a hand lives in a plant: model instance, root body, joint position indices."""
+    """Where a hand lives in a plant: model instance, root body, joint indices, geometries.
 
-    instance: object
-    root_body: object
-    joint_position_index: np.ndarray  # q index in the plant of each joint, in hand joint order
-    geometry_ids: list
+    Joint indices are read on first use, which must come after `plant.Finalize()`."""
+
+    def __init__(self, plant, instance, root_body, joint_names: list[str], geometry_ids: list):
+        self._plant = plant
+        self._joints = [plant.GetJointByName(n, instance) for n in joint_names]
+        self.instance = instance
+        self.root_body = root_body
+        self.geometry_ids = geometry_ids
+
+    @cached_property
+    def joint_position_index(self) -> np.ndarray:
+        """q index in the plant of each joint, in hand joint order."""
+        return np.array([j.position_start() for j in self._joints])
+
+    @cached_property
+    def joint_velocity_index(self) -> np.ndarray:
+        """v index in the plant of each joint, in hand joint order."""
+        return np.array([j.velocity_start() for j in self._joints])
 
     def positions(self, plant, wrist: np.ndarray, q: np.ndarray) -> np.ndarray:
         """Full plant position vector for a hand alone in `plant`: wrist [xyz, wxyz] + joints."""
@@ -47,8 +61,8 @@ class DrakeHand:
 def add_hand_to_plant(
     hand, plant, scene_graph=None, filter_self_collisions: bool = True
 ) -> DrakeHand:
-    """Parse the hand's URDF into `plant` (not yet finalized). Call `plant.Finalize()` after
-    adding everything; indices in the returned DrakeHand are valid after finalizing."""
+    """Parse the hand's URDF into `plant` (not yet finalized); call `plant.Finalize()` after
+    adding everything else."""
     parser = Parser(plant)
     parser.SetAutoRenaming(True)
     (instance,) = parser.AddModels(str(hand.urdf_path))
@@ -66,28 +80,4 @@ def add_hand_to_plant(
                         GeometrySet(plant.GetCollisionGeometriesForBody(bodies[b])),
                     )
                 )
-    return _LazyDrakeHand(plant, instance, bodies[hand.root_link], hand.joint_names, geometry_ids)
-
-
-class _LazyDrakeHand(DrakeHand):
-    """DrakeHand whose joint indices are looked up on first use (after Finalize)."""
-
-    def __init__(self, plant, instance, root_body, joint_names, geometry_ids):
-        self._plant, self._names = plant, joint_names
-        self.instance, self.root_body, self.geometry_ids = instance, root_body, geometry_ids
-        self._index = None
-
-    @property
-    def joint_velocity_index(self) -> np.ndarray:
-        """v index in the plant of each joint, in hand joint order."""
-        return np.array(
-            [self._plant.GetJointByName(n, self.instance).velocity_start() for n in self._names]
-        )
-
-    @property
-    def joint_position_index(self) -> np.ndarray:  # type: ignore[override]
-        if self._index is None:
-            self._index = np.array(
-                [self._plant.GetJointByName(n, self.instance).position_start() for n in self._names]
-            )
-        return self._index
+    return DrakeHand(plant, instance, bodies[hand.root_link], hand.joint_names, geometry_ids)
