@@ -1,8 +1,8 @@
 """The Drake grasp program: coarse interaction elements -> exact, collision-free joint values.
 
 A MultibodyPlant holds the hand (floating wrist; only the hand.json ignore pairs filtered, so
-fingers cannot pass through each other) and the object as anchored convex pieces. One nonlinear program (Drake InverseKinematics, solved by SNOPT)
-takes weighted costs (anchor fingertips to anchor points, hand surface points to target
+fingers cannot pass through each other) and the object as anchored convex pieces. One
+nonlinear program (Drake InverseKinematics, solved by SNOPT) takes weighted costs (anchor fingertips to anchor points, hand surface points to target
 positions, a wrist prior) subject to a minimum hand-object signed distance and joint limits.
 SNOPT often reports failure at the optimum with many convex pieces, so every answer is checked
 directly (penetration, anchor error) and the flag is only recorded.
