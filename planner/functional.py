@@ -42,6 +42,7 @@ class PlannerSettings:
     palm_margin: float = 0.004  # m between the palm target and the part's near surface
     use_palm: bool = True
     solve_batch: int = 4  # proposals solved before the best of them are validated
+    min_quality: float = 0.02  # epsilon below this: validated only when nothing better is left
     contact_distance: float = 0.006  # m: hand geometry this close to the object counts as contact
     program: ProgramSettings = field(default_factory=ProgramSettings)
 
@@ -257,12 +258,31 @@ class FunctionalPlanner:
         build = time.perf_counter() - start
         proposals = self.propose(obj, part)
         propose_time = time.perf_counter() - start - build
-        # solve proposals a batch at a time; validate each batch's solved candidates best
-        # first by force-closure quality, so good grasps are found without solving them all
+        # Solve proposals a batch at a time and validate each batch's solved candidates best
+        # first by force-closure quality, so good grasps are found without solving them all.
+        # Candidates without force closure (epsilon below `min_quality`) rarely hold: they wait
+        # until every proposal is solved, and are validated only if validations remain.
         candidates: list[CandidateResult] = []
-        fallback = None
+        deferred: list[CandidateResult] = []
+        found: list[CandidateResult | None] = [None, None]  # [instructed part, any part]
         position = 0
         batch = self.settings.solve_batch
+
+        def try_in_order(cands: list[CandidateResult]) -> bool:
+            nonlocal position
+            for cand in sorted(cands, key=lambda c: (-c.quality, c.rank)):
+                if position >= self.settings.max_candidates:
+                    return False
+                cand.order = position
+                position += 1
+                self._validate(program, obj, instruction, cand)
+                if cand.success and cand.part == part:
+                    found[0] = cand
+                    return True
+                if cand.success and found[1] is None:
+                    found[1] = cand
+            return False
+
         for first in range(0, len(proposals), batch):
             if position >= self.settings.max_candidates:
                 break
@@ -273,17 +293,15 @@ class FunctionalPlanner:
             if first == 0:
                 solved[0].times.update(build=build, propose=propose_time)
             candidates.extend(solved)
-            order = sorted((c for c in solved if c.solve.ok), key=lambda c: (-c.quality, c.rank))
-            for cand in order:
-                if position >= self.settings.max_candidates:
-                    break
-                cand.order = position
-                position += 1
-                self._validate(program, obj, instruction, cand)
-                if cand.success and cand.part == part:
-                    return PlanResult(instruction, self.hand.name, cand.grasp, candidates, notes)
-                if cand.success and fallback is None:
-                    fallback = cand
+            good = [c for c in solved if c.solve.ok and c.quality >= self.settings.min_quality]
+            deferred += [c for c in solved if c.solve.ok and c.quality < self.settings.min_quality]
+            if try_in_order(good):
+                break
+        if found[0] is None and found[1] is None:
+            try_in_order(deferred)
+        if found[0] is not None:
+            return PlanResult(instruction, self.hand.name, found[0].grasp, candidates, notes)
+        fallback = found[1]
         if fallback is not None:
             notes.append(
                 f"no holding grasp touched the {part}; returning one that touches {fallback.part}"
