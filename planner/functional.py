@@ -26,7 +26,13 @@ from models.errors import InstructionError, PlanningError
 from models.grasp import Grasp
 from models.hands import HandModel, load_hand
 from models.objects import Instruction, ObjectModel, load_object, parse_instruction
-from planner.grasp_program import GraspTargets, ProgramSettings, SolveResult, grasp_program
+from planner.grasp_program import (
+    GraspProgram,
+    GraspTargets,
+    ProgramSettings,
+    SolveResult,
+    grasp_program,
+)
 from planner.labels import voted_part
 from planner.quality import epsilon_quality
 from planner.validation import validate
@@ -331,46 +337,66 @@ class FunctionalPlanner:
         return cand
 
     def _validate(self, program, obj, instruction, cand: CandidateResult) -> None:
-        """Pregrasp, squeeze, the Grasp record, MuJoCo validation and the voted part."""
-        solved = cand.solve
-        t1 = time.perf_counter()
-        hand = self.hand
-        names = list(hand.meta.anchor_fingers)
-        wrist_t = torch.tensor(solved.wrist[None])
-        tips = hand.fingertip_positions(wrist_t, torch.tensor(solved.q[None]), names)[0].numpy()
-        nearest = np.argmin(np.linalg.norm(obj.points[None] - tips[:, None], axis=2), axis=1)
-        pre = program.pregrasp(solved.wrist, solved.q, obj.normals[nearest])
-        squeeze = program.squeeze(solved.q, pre)
-        grasp = Grasp(
-            hand=hand.name,
-            wrist_pos=solved.wrist[:3],
-            wrist_quat=solved.wrist[3:7],
-            grasp=solved.q,
-            pregrasp=pre,
-            squeeze=squeeze,
-            joint_names=tuple(hand.joint_names),
-            anchors=obj.points[nearest],
-            instruction=instruction.text,
-        )
-        t2 = time.perf_counter()
-        result = validate(grasp, obj.collision_pieces(), hand, self.settings.protocol)
-        t3 = time.perf_counter()
-        all_tips = hand.fingertip_positions(wrist_t, torch.tensor(solved.q[None]))[0].numpy()
-        cand.part = voted_part(all_tips, obj.points, obj.point_labels, obj.part_names)
-        cand.success = bool(result.success)
-        cand.validation = result.to_dict()
-        grasp.metrics.update(
-            {
-                "success": cand.success,
-                "part": cand.part,
-                "anchor_error": solved.anchor_error,
-                "min_distance": solved.min_distance,
-                "epsilon": cand.quality,
-                "validation": cand.validation,
-            }
-        )
-        cand.grasp = grasp
-        cand.times.update({"pregrasp": t2 - t1, "validate": t3 - t2})
+        """Complete the candidate's grasp, validate it and vote its part (fills `cand`)."""
+        done = finish_grasp(program, obj, cand.solve, instruction.text, self.settings.protocol)
+        done.grasp.metrics["epsilon"] = cand.quality
+        cand.grasp, cand.success, cand.part = done.grasp, done.success, done.part
+        cand.validation = done.validation
+        cand.times.update(done.times)
+
+
+@dataclass
+class FinishedGrasp:
+    """A solved program turned into a validated, labelled grasp."""
+
+    grasp: Grasp
+    success: bool
+    part: str
+    validation: dict[str, Any]
+    times: dict[str, float]
+
+
+def finish_grasp(
+    program: GraspProgram, obj: ObjectModel, solved: SolveResult, instruction: str, protocol: str
+) -> FinishedGrasp:
+    """Pregrasp (back along the surface normals at the anchor fingertips), BODex squeeze, the
+    Grasp record, MuJoCo validation and the voted part: every planned or transferred grasp
+    goes through these same steps."""
+    t1 = time.perf_counter()
+    hand = program.hand
+    wrist_t = torch.tensor(solved.wrist[None])
+    q_t = torch.tensor(solved.q[None])
+    tips = hand.fingertip_positions(wrist_t, q_t, list(hand.meta.anchor_fingers))[0].numpy()
+    nearest = np.argmin(np.linalg.norm(obj.points[None] - tips[:, None], axis=2), axis=1)
+    pre = program.pregrasp(solved.wrist, solved.q, obj.normals[nearest])
+    grasp = Grasp(
+        hand=hand.name,
+        wrist_pos=solved.wrist[:3],
+        wrist_quat=solved.wrist[3:7],
+        grasp=solved.q,
+        pregrasp=pre,
+        squeeze=program.squeeze(solved.q, pre),
+        joint_names=tuple(hand.joint_names),
+        anchors=obj.points[nearest],
+        instruction=instruction,
+    )
+    t2 = time.perf_counter()
+    result = validate(grasp, obj.collision_pieces(), hand, protocol)
+    t3 = time.perf_counter()
+    all_tips = hand.fingertip_positions(wrist_t, q_t)[0].numpy()
+    part = voted_part(all_tips, obj.points, obj.point_labels, obj.part_names)
+    validation = result.to_dict()
+    grasp.metrics.update(
+        {
+            "success": bool(result.success),
+            "part": part,
+            "anchor_error": solved.anchor_error,
+            "min_distance": solved.min_distance,
+            "validation": validation,
+        }
+    )
+    times = {"pregrasp": t2 - t1, "validate": t3 - t2}
+    return FinishedGrasp(grasp, bool(result.success), part, validation, times)
 
 
 def plan_grasp(

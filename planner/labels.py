@@ -1,4 +1,4 @@
-"""Which part a grasp touches (the voting rule of DESIGN.md) and a grasp's anchors."""
+"""Which part a grasp touches: the voting rule of DESIGN.md."""
 
 from __future__ import annotations
 
@@ -35,9 +35,3 @@ def voted_part(
     counts = Counter(votes)
     best = max(counts.values())
     return next(v for v in votes if counts[v] == best)
-
-
-def nearest_points(tips: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """The object points nearest to each fingertip (a grasp's anchors)."""
-    d = np.linalg.norm(points[None] - np.asarray(tips)[:, None], axis=2)
-    return points[np.argmin(d, axis=1)]

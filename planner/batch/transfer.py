@@ -11,7 +11,6 @@ target. The answer then gets a pregrasp and squeeze and is validated like any pl
 from __future__ import annotations
 
 import json
-import time
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from functools import cache
@@ -25,11 +24,9 @@ from models.grasp import Grasp
 from models.hands import HandModel, load_hand
 from models.objects import ObjectModel
 from planner.batch.jobs import Job
-from planner.functional import HandGeometry
+from planner.functional import HandGeometry, finish_grasp
 from planner.grasp_program import GraspProgram, GraspTargets, ProgramSettings, SolveResult
 from planner.grasp_program import grasp_program as build_program
-from planner.labels import nearest_points, voted_part
-from planner.validation import validate
 
 
 @cache
@@ -78,41 +75,10 @@ def complete_grasp(
     out = Completed(solved, times={"solve": solved.solve_time})
     if not solved.ok:
         return out
-    hand = program.hand
-    t1 = time.perf_counter()
-    tips = anchor_tips(hand, solved.wrist, solved.q)
-    nearest = np.argmin(np.linalg.norm(obj.points[None] - tips[:, None], axis=2), axis=1)
-    pre = program.pregrasp(solved.wrist, solved.q, obj.normals[nearest])
-    grasp = Grasp(
-        hand=hand.name,
-        wrist_pos=solved.wrist[:3],
-        wrist_quat=solved.wrist[3:7],
-        grasp=solved.q,
-        pregrasp=pre,
-        squeeze=program.squeeze(solved.q, pre),
-        joint_names=tuple(hand.joint_names),
-        anchors=nearest_points(tips, obj.points),
-        instruction=instruction,
-    )
-    t2 = time.perf_counter()
-    result = validate(grasp, obj.collision_pieces(), hand, protocol)
-    t3 = time.perf_counter()
-    w = torch.as_tensor(solved.wrist[None])
-    all_tips = hand.fingertip_positions(w, torch.as_tensor(solved.q[None]))[0].numpy()
-    out.part = voted_part(all_tips, obj.points, obj.point_labels, obj.part_names)
-    out.success = bool(result.success)
-    out.validation = result.to_dict()
-    grasp.metrics.update(
-        {
-            "success": out.success,
-            "part": out.part,
-            "anchor_error": solved.anchor_error,
-            "min_distance": solved.min_distance,
-            "validation": out.validation,
-        }
-    )
-    out.grasp = grasp
-    out.times.update({"pregrasp": t2 - t1, "validate": t3 - t2})
+    done = finish_grasp(program, obj, solved, instruction, protocol)
+    out.grasp, out.success, out.part = done.grasp, done.success, done.part
+    out.validation = done.validation
+    out.times.update(done.times)
     return out
 
 
