@@ -16,9 +16,9 @@ from pathlib import Path
 
 import numpy as np
 
-from models.grasp import from_dexgraspbench
-from planner.validation import find_object, get_protocol, mjcf_hand, validate
+from planner.validation import get_protocol, mjcf_hand, validate
 from planner.validation.hands import mjcf_joint_names
+from planner.validation.layout import read_rows, row_case
 
 BENCH = Path(__file__).resolve().parents[1].parent / "shared" / "reference" / "dexgraspbench"
 
@@ -33,21 +33,11 @@ def main() -> None:
     xml = BENCH / "hand" / "shadow_right_hand.xml"
     hand = mjcf_hand(xml)
     xml_joints = mjcf_joint_names(str(xml.resolve()))
-    with np.load(BENCH / "grasps.npz", allow_pickle=False) as npz:
-        rows = {k: npz[k] for k in npz.files}
+    rows = read_rows(BENCH / "grasps.npz")
     idx = np.linspace(0, len(rows["grasp_qpos"]) - 1, args.grasps).round().astype(int)
-    cases = []
-    for i in idx:
-        grasp = from_dexgraspbench(
-            rows["pregrasp_qpos"][i],
-            rows["grasp_qpos"][i],
-            rows["squeeze_qpos"][i],
-            hand=hand.name,
-            joint_names=hand.joint_names,
-            xml_joint_names=xml_joints,
-        )
-        obj = find_object(BENCH / "objects", str(rows["object"][i]), float(rows["scale"][i]))
-        cases.append((grasp, obj, rows["obj_pose"][i]))
+    cases = [
+        (*row_case(rows, i, hand, xml_joints, BENCH / "objects"), rows["obj_pose"][i]) for i in idx
+    ]
 
     shared = get_protocol(args.preset)
     # DexGraspBench's way: the closing re-simulated per direction, every hold run to the end

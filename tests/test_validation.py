@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from models.errors import GraspError, HandError, ObjectError
-from models.grasp import Grasp, from_dexgraspbench
+from models.grasp import Grasp
 from planner.validation import (
     as_collision_object,
     find_object,
@@ -20,6 +20,7 @@ from planner.validation import (
 )
 from planner.validation.batch import validate_many
 from planner.validation.hands import mjcf_joint_names
+from planner.validation.layout import read_rows, row_case
 from planner.validation.protocol import ProtocolError
 
 REFERENCE = Path(__file__).resolve().parents[1].parent / "shared" / "reference"
@@ -34,8 +35,7 @@ needs_reference = pytest.mark.skipif(
 
 @pytest.fixture(scope="module")
 def rows():
-    with np.load(BENCH / "grasps.npz", allow_pickle=False) as npz:
-        return {k: npz[k] for k in npz.files}
+    return read_rows(BENCH / "grasps.npz")
 
 
 @pytest.fixture(scope="module")
@@ -44,15 +44,8 @@ def hand():
 
 
 def reference_case(rows, hand, i):
-    grasp = from_dexgraspbench(
-        rows["pregrasp_qpos"][i],
-        rows["grasp_qpos"][i],
-        rows["squeeze_qpos"][i],
-        hand=hand.name,
-        joint_names=hand.joint_names,
-        xml_joint_names=mjcf_joint_names(str(HAND_XML.resolve())),
-    )
-    obj = find_object(BENCH / "objects", str(rows["object"][i]), float(rows["scale"][i]))
+    xml = mjcf_joint_names(str(HAND_XML.resolve()))
+    grasp, obj = row_case(rows, i, hand, xml, BENCH / "objects")
     return grasp, obj, rows["obj_pose"][i]
 
 

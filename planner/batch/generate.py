@@ -25,6 +25,7 @@ class GenerateSettings:
     splits: Sequence[str] = ("train", "val", "test", "heldout")
     category_names: Sequence[str] | None = None
     objects_per_category: int = 10
+    start_seed: int = 0
     variants: int = 3
     max_candidates: int = 8
     protocol: str = "paper"
@@ -56,6 +57,7 @@ def generate_dataset(
         splits=s.splits,
         category_names=s.category_names,
         objects_per_category=s.objects_per_category,
+        start_seed=s.start_seed,
         variants=s.variants,
         max_candidates=s.max_candidates,
         protocol=s.protocol,

@@ -9,6 +9,7 @@ import json
 from planner.batch import JobError, read_jobs, run_batch
 from planner.batch.executors import JobFn
 from planner.batch.runner import SHARD_SIZE
+from planner.commands.jobs import add_backend_arguments
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -21,10 +22,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("jobs", metavar="JOBS_FILE")
     p.add_argument("out", metavar="OUT_DIR")
-    p.add_argument("--workers", type=int, default=1, help="local processes or Ray CPUs (default 1)")
-    where = p.add_mutually_exclusive_group()
-    where.add_argument("--ray", action="store_true", help="start a local Ray instance")
-    where.add_argument("--ray-address", metavar="ADDR", help="join a running Ray cluster")
+    add_backend_arguments(p)
     p.add_argument(
         "--shard-size",
         type=int,
@@ -36,7 +34,6 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="MODULE:FUNCTION",
         help="solve jobs with this function (Job -> dict) instead of the planner",
     )
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.set_defaults(func=run)
 

@@ -8,8 +8,7 @@ import shlex
 import sys
 from pathlib import Path
 
-from models.hands import available_hands
-from models.objects import SPLITS, categories
+from planner.commands.jobs import add_backend_arguments, add_job_arguments
 
 DEFAULT_ROOT = Path(__file__).resolve().parents[2] / "data" / "grasps_v1"
 
@@ -26,19 +25,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     g = dsub.add_parser("generate", help="jobs -> batch -> transfers -> dataset + card")
     g.add_argument("out", metavar="OUT_DIR")
     g.add_argument("--work", metavar="DIR", help="jobs and result shards (default OUT_DIR/work)")
-    g.add_argument("--hands", nargs="+", default=available_hands(), metavar="HAND")
-    g.add_argument(
-        "--split",
-        nargs="+",
-        dest="splits",
-        default=["train", "val", "test", "heldout"],
-        choices=SPLITS,
-    )
-    g.add_argument("--categories", nargs="+", choices=categories(), metavar="CATEGORY")
-    g.add_argument("--objects-per-category", type=int, default=10, metavar="N")
-    g.add_argument("--variants", type=int, default=3, help="varied wrist poses per pair")
-    g.add_argument("--candidates", type=int, default=8, help="proposals each job may try")
-    g.add_argument("--preset", default="paper", help="validation preset (default paper)")
+    add_job_arguments(g, splits=["train", "val", "test", "heldout"], variants=3)
     g.add_argument("--no-transfer", action="store_true", help="skip cross-hand transfers")
     g.add_argument(
         "--transfer-per-pair",
@@ -47,11 +34,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="N",
         help="source grasps per object, instruction and hand that seed other hands (default 1)",
     )
-    g.add_argument("--workers", type=int, default=1)
-    where = g.add_mutually_exclusive_group()
-    where.add_argument("--ray", action="store_true", help="start a local Ray instance")
-    where.add_argument("--ray-address", metavar="ADDR", help="join a running Ray cluster")
-    g.add_argument("--no-progress", action="store_true")
+    add_backend_arguments(g)
     g.set_defaults(func=run_generate)
 
     c = dsub.add_parser("compact", help="batch result folders -> dataset folder + card")
@@ -77,6 +60,7 @@ def run_generate(args: argparse.Namespace) -> int:
         splits=args.splits,
         category_names=args.categories,
         objects_per_category=args.objects_per_category,
+        start_seed=args.start_seed,
         variants=args.variants,
         max_candidates=args.candidates,
         protocol=args.preset,

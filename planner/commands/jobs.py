@@ -22,24 +22,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
     m = jsub.add_parser("make", help="jobs for library objects x instructions x hands x variants")
     m.add_argument("out", metavar="OUT.jsonl")
-    m.add_argument(
-        "--split", nargs="+", default=["train", "val", "test"], choices=SPLITS, dest="splits"
-    )
-    m.add_argument("--categories", nargs="+", choices=categories(), metavar="CATEGORY")
-    m.add_argument("--hands", nargs="+", default=available_hands(), metavar="HAND")
-    m.add_argument(
-        "--objects-per-category",
-        type=int,
-        default=10,
-        metavar="N",
-        help="seeds START..START+N-1 of each category, kept where their split is asked for",
-    )
-    m.add_argument("--start-seed", type=int, default=0)
-    m.add_argument(
-        "--variants", type=int, default=2, help="grasps with varied wrist poses per pair"
-    )
-    m.add_argument("--candidates", type=int, default=8, help="proposals each job may try")
-    m.add_argument("--preset", default="paper", help="validation preset (default paper)")
+    add_job_arguments(m, splits=["train", "val", "test"], variants=2)
     m.set_defaults(func=run_make)
 
     t = jsub.add_parser("transfer", help="every valid grasp of a batch seeds the other hands")
@@ -53,6 +36,37 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="at most N source grasps per object, instruction and source hand",
     )
     t.set_defaults(func=run_transfer)
+
+
+def add_job_arguments(p: argparse.ArgumentParser, splits: list[str], variants: int) -> None:
+    """Which jobs to make: shared by `jobs make` and `dataset generate`."""
+    p.add_argument("--split", nargs="+", default=splits, choices=SPLITS, dest="splits")
+    p.add_argument("--categories", nargs="+", choices=categories(), metavar="CATEGORY")
+    p.add_argument("--hands", nargs="+", default=available_hands(), metavar="HAND")
+    p.add_argument(
+        "--objects-per-category",
+        type=int,
+        default=10,
+        metavar="N",
+        help="seeds START..START+N-1 of each category, kept where their split is asked for",
+    )
+    p.add_argument("--start-seed", type=int, default=0)
+    p.add_argument(
+        "--variants", type=int, default=variants, help="grasps with varied wrist poses per pair"
+    )
+    p.add_argument(
+        "--candidates", type=int, default=8, help="grasps each job may validate (default 8)"
+    )
+    p.add_argument("--preset", default="paper", help="validation preset (default paper)")
+
+
+def add_backend_arguments(p: argparse.ArgumentParser) -> None:
+    """Where jobs run: shared by `batch` and `dataset generate`."""
+    p.add_argument("--workers", type=int, default=1, help="local processes or Ray CPUs (default 1)")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--ray", action="store_true", help="start a local Ray instance")
+    where.add_argument("--ray-address", metavar="ADDR", help="join a running Ray cluster")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
 def run_make(args: argparse.Namespace) -> int:

@@ -15,14 +15,11 @@ from typing import Any
 
 import numpy as np
 
-from models.errors import DrograspError, GraspError
-from models.grasp import Grasp, from_dexgraspbench
+from models.errors import DrograspError
 from planner.validation.batch import validate_many
 from planner.validation.hands import HandAdapter, mjcf_hand, mjcf_joint_names, project_hand
-from planner.validation.objects import find_object
+from planner.validation.layout import read_rows, row_case
 from planner.validation.protocol import PRESETS, get_protocol
-
-LAYOUT_KEYS = ("object", "scale", "pregrasp_qpos", "grasp_qpos", "squeeze_qpos")
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -69,21 +66,6 @@ def _overrides(items: list[str]) -> dict[str, Any]:
     return out
 
 
-def _load_rows(path: Path, limit: int | None) -> dict[str, np.ndarray]:
-    if not path.is_file():
-        raise GraspError(f"{path}: no such grasps file")
-    try:
-        with np.load(path, allow_pickle=False) as npz:
-            rows = {k: npz[k] for k in npz.files}
-    except ValueError as err:
-        raise GraspError(f"{path}: not a readable NPZ without pickle ({err})") from None
-    missing = [k for k in LAYOUT_KEYS if k not in rows]
-    if missing:
-        raise GraspError(f"{path}: missing arrays {missing} of DexGraspBench's layout")
-    n = len(rows["grasp_qpos"]) if limit is None else min(limit, len(rows["grasp_qpos"]))
-    return {k: v[:n] if v.ndim and len(v) >= n else v for k, v in rows.items()}
-
-
 def _hand(args: argparse.Namespace) -> tuple[HandAdapter, tuple[str, ...], dict[str, str]]:
     if args.hand:
         adapter = project_hand(args.hand)
@@ -120,24 +102,12 @@ def _summary(rows: dict[str, np.ndarray], results: list, wall: float, preset: st
 
 def run(args: argparse.Namespace) -> int:
     protocol = get_protocol(args.preset, **_overrides(args.set))
-    rows = _load_rows(args.file, args.limit)
+    rows = read_rows(args.file, args.limit)
     adapter, xml_joints, joint_map = _hand(args)
     n = len(rows["grasp_qpos"])
-    grasps: list[Grasp] = []
-    objects = []
-    for i in range(n):
-        grasps.append(
-            from_dexgraspbench(
-                rows["pregrasp_qpos"][i],
-                rows["grasp_qpos"][i],
-                rows["squeeze_qpos"][i],
-                hand=adapter.name,
-                joint_names=adapter.joint_names,
-                xml_joint_names=xml_joints,
-                joint_map=joint_map,
-            )
-        )
-        objects.append(find_object(args.objects, str(rows["object"][i]), float(rows["scale"][i])))
+    cases = [row_case(rows, i, adapter, xml_joints, args.objects, joint_map) for i in range(n)]
+    grasps = [grasp for grasp, _ in cases]
+    objects = [obj for _, obj in cases]
     poses = rows.get("obj_pose")
     start = time.perf_counter()
     results = validate_many(

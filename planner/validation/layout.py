@@ -1,0 +1,58 @@
+"""Grasp files in DexGraspBench's layout: read the arrays, turn row i into (Grasp, object).
+
+The `validate` command, the validation benchmark and the tests all read the reference grasps
+this one way.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+import numpy as np
+
+from models.errors import GraspError
+from models.grasp import Grasp, from_dexgraspbench
+from planner.validation.hands import HandAdapter
+from planner.validation.objects import CollisionObject, find_object
+
+LAYOUT_KEYS = ("object", "scale", "pregrasp_qpos", "grasp_qpos", "squeeze_qpos")
+
+
+def read_rows(path: Path, limit: int | None = None) -> dict[str, np.ndarray]:
+    """The arrays of a grasps NPZ (first `limit` rows), checked for the layout's keys."""
+    path = Path(path)
+    if not path.is_file():
+        raise GraspError(f"{path}: no such grasps file")
+    try:
+        with np.load(path, allow_pickle=False) as npz:
+            rows = {k: npz[k] for k in npz.files}
+    except ValueError as err:
+        raise GraspError(f"{path}: not a readable NPZ without pickle ({err})") from None
+    missing = [k for k in LAYOUT_KEYS if k not in rows]
+    if missing:
+        raise GraspError(f"{path}: missing arrays {missing} of DexGraspBench's layout")
+    n = len(rows["grasp_qpos"]) if limit is None else min(limit, len(rows["grasp_qpos"]))
+    return {k: v[:n] if v.ndim and len(v) >= n else v for k, v in rows.items()}
+
+
+def row_case(
+    rows: Mapping[str, np.ndarray],
+    i: int,
+    hand: HandAdapter,
+    xml_joint_names: Sequence[str],
+    objects_dir: str | Path,
+    joint_map: Mapping[str, str] | None = None,
+) -> tuple[Grasp, CollisionObject]:
+    """Row i as a Grasp for `hand` and its scaled object from `objects_dir`."""
+    grasp = from_dexgraspbench(
+        rows["pregrasp_qpos"][i],
+        rows["grasp_qpos"][i],
+        rows["squeeze_qpos"][i],
+        hand=hand.name,
+        joint_names=hand.joint_names,
+        xml_joint_names=xml_joint_names,
+        joint_map=joint_map,
+    )
+    obj = find_object(objects_dir, str(rows["object"][i]), float(rows["scale"][i]))
+    return grasp, obj
