@@ -50,6 +50,10 @@ class PlannerSettings:
     solve_batch: int = 4  # proposals solved before the best of them are validated
     min_quality: float = 0.02  # epsilon below this: validated only when nothing better is left
     contact_distance: float = 0.006  # m: hand geometry this close to the object counts as contact
+    # Validate every candidate within max_candidates instead of stopping at the first grasp that
+    # holds on the part: solves are already paid for, so each extra validation is the cheapest
+    # way to another grasp (dataset generation keeps them all, see PlanResult.holding).
+    validate_all: bool = False
     program: ProgramSettings = field(default_factory=ProgramSettings)
 
 
@@ -106,6 +110,13 @@ class PlanResult:
     @property
     def success(self) -> bool:
         return self.best is not None and self.best.success
+
+    @property
+    def holding(self) -> list[CandidateResult]:
+        """Every validated candidate that held and touched the instructed part, in validation
+        order (the returned grasp first)."""
+        held = [c for c in self.candidates if c.success and c.part == self.instruction.part]
+        return sorted(held, key=lambda c: c.order if c.order is not None else -1)
 
     @property
     def part_touched(self) -> str | None:
@@ -282,9 +293,10 @@ class FunctionalPlanner:
                 cand.order = position
                 position += 1
                 self._validate(program, obj, instruction, cand)
-                if cand.success and cand.part == part:
+                if cand.success and cand.part == part and found[0] is None:
                     found[0] = cand
-                    return True
+                    if not self.settings.validate_all:
+                        return True
                 if cand.success and found[1] is None:
                     found[1] = cand
             return False

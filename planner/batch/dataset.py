@@ -43,7 +43,8 @@ class GeneratorStats:
     jobs: Counter = field(default_factory=Counter)
     errors: Counter = field(default_factory=Counter)
     holds: Counter = field(default_factory=Counter)
-    valid: Counter = field(default_factory=Counter)
+    valid: Counter = field(default_factory=Counter)  # jobs with a valid grasp
+    grasps: Counter = field(default_factory=Counter)  # valid grasps (several per validate_all job)
     kept: Counter = field(default_factory=Counter)
     transfers: Counter = field(default_factory=Counter)  # "src->dst" jobs
     transfers_valid: Counter = field(default_factory=Counter)
@@ -58,6 +59,7 @@ class GeneratorStats:
             "errors": rows(self.errors),
             "holds": rows(self.holds),
             "valid": rows(self.valid),
+            "grasps": rows(self.grasps),
             "kept": rows(self.kept),
             "transfers": rows(self.transfers),
             "transfers_valid": rows(self.transfers_valid),
@@ -111,6 +113,17 @@ def _row(record: dict[str, Any]) -> dict[str, Any]:
     }
 
 
+def _valid_grasps(record: dict[str, Any]) -> list[dict[str, Any]]:
+    """The record's valid grasps as records of one grasp each: every holding candidate of a
+    validate_all job, else the returned grasp if it is valid."""
+    if "holding" in record:
+        part = record["part_instructed"]
+        return [{**record, **entry, "part_voted": part} for entry in record["holding"]]
+    if record.get("valid") and record.get("grasp") is not None:
+        return [record]
+    return []
+
+
 def collect(records: Iterable[dict[str, Any]]) -> tuple[list[dict[str, Any]], GeneratorStats]:
     """Valid, deduplicated rows from result records (in record order) and the generator's
     success counts."""
@@ -129,18 +142,19 @@ def collect(records: Iterable[dict[str, Any]]) -> tuple[list[dict[str, Any]], Ge
             pair = f"{job['source']['hand']}->{job['hand']}"
             stats.transfers[pair] += 1
             stats.transfers_valid[pair] += bool(record.get("valid"))
-        if not record.get("valid") or record.get("grasp") is None:
+        valid = _valid_grasps(record)
+        stats.grasps[key] += len(valid)
+        if valid and "category" not in job["object"]:
+            stats.skipped_objects += len(valid)
             continue
-        if "category" not in job["object"]:
-            stats.skipped_objects += 1
-            continue
-        row = _row(record)
-        group = groups[(row["hand"], row["category"], row["seed"], row["instruction"])]
-        if _duplicate(row, group):
-            continue
-        group.append(row)
-        rows.append(row)
-        stats.kept[key] += 1
+        for one in valid:
+            row = _row(one)
+            group = groups[(row["hand"], row["category"], row["seed"], row["instruction"])]
+            if _duplicate(row, group):
+                continue
+            group.append(row)
+            rows.append(row)
+            stats.kept[key] += 1
     return rows, stats
 
 
@@ -279,13 +293,20 @@ def dataset_card(root: str | Path, info: dict[str, Any], meta: dict[str, Any]) -
     lines += _table("intent", info["intents"])
     lines += _table("source", info["sources"])
     lines += ["## Generator success rates", ""]
-    lines += ["| source:hand | jobs | errors | holds | valid | kept (after dedup) |"]
-    lines += ["|---|---:|---:|---:|---:|---:|"]
+    lines += [
+        "A job is one planner run (a window of candidates for one object, instruction and hand) "
+        "or one transfer; `holds` and `valid` count jobs whose returned grasp held / held on the "
+        "instructed part; `valid grasps` counts every such grasp the jobs found.",
+        "",
+        "| source:hand | jobs | errors | holds | valid | valid grasps | kept (after dedup) |",
+        "|---|---:|---:|---:|---:|---:|---:|",
+    ]
     for key, jobs in gen["jobs"].items():
         valid = gen["valid"].get(key, 0)
         lines.append(
             f"| {key} | {jobs} | {gen['errors'].get(key, 0)} | {gen['holds'].get(key, 0)} | "
-            f"{valid} ({100 * valid / max(jobs, 1):.0f}%) | {gen['kept'].get(key, 0)} |"
+            f"{valid} ({100 * valid / max(jobs, 1):.0f}%) | {gen.get('grasps', {}).get(key, 0)} | "
+            f"{gen['kept'].get(key, 0)} |"
         )
     lines.append("")
     if gen["transfers"]:

@@ -29,6 +29,7 @@ class GenerateSettings:
     variants: int = 3
     max_candidates: int = 8
     protocol: str = "paper"
+    validate_all: bool = True  # keep every holding candidate of a job (see PlannerSettings)
     transfer: bool = True
     transfer_per_pair: int | None = 1
     workers: int = 1
@@ -61,6 +62,7 @@ def generate_dataset(
         variants=s.variants,
         max_candidates=s.max_candidates,
         protocol=s.protocol,
+        validate_all=s.validate_all,
     )
     write_jobs(jobs, jobs_file)
     run = dict(

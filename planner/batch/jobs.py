@@ -11,7 +11,7 @@ from __future__ import annotations
 import json
 import re
 from collections.abc import Iterable, Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -50,6 +50,7 @@ class Job:
     max_candidates: int = 8
     protocol: str = "paper"
     source: dict[str, Any] | None = None
+    validate_all: bool = False  # keep every holding candidate, not just the first (datasets)
     id: str = field(default="")
 
     def __post_init__(self) -> None:
@@ -79,6 +80,8 @@ class Job:
         d = asdict(self)
         if d["source"] is None:
             d.pop("source")
+        if not d["validate_all"]:
+            d.pop("validate_all")  # jobs files written before the field existed stay the same
         return d
 
     @classmethod
@@ -143,13 +146,15 @@ def make_jobs(
     variants: int = 2,
     max_candidates: int = 8,
     protocol: str = "paper",
+    validate_all: bool = False,
 ) -> list[Job]:
     """Jobs from the object library and instruction table.
 
     Seeds start_seed .. start_seed + objects_per_category - 1 of every category, kept where their
     split is in `splits` (held-out categories only with "heldout"); every instruction of the
-    category; every hand; `variants` varied wrist poses each. Ordered by object, then hand, then
-    instruction, then variant, so a worker reuses the (hand, object) program it just built.
+    category; every hand; `variants` varied wrist poses each. Ordered by seed, then category,
+    hand, instruction and variant: a worker reuses the (hand, object) program it just built, and
+    a batch stopped part-way has covered every category alike.
     """
     hands = list(hands or available_hands())
     unknown = set(splits) - set(SPLITS)
@@ -158,16 +163,19 @@ def make_jobs(
     names = list(category_names or categories())
     if variants < 1 or objects_per_category < 1:
         raise JobError("variants and objects_per_category must be at least 1")
-    jobs = []
+    objects = []
     for name in names:
         chosen = set()
         for split in splits:
             chosen.update(seeds(name, split, objects_per_category, start_seed))
-        in_range = sorted(s for s in chosen if s < start_seed + objects_per_category)
-        for seed in in_range:
-            ref = {"category": name, "seed": seed}
-            for hand in hands:
-                for instr in instructions(name):
-                    for k in range(variants):
-                        jobs.append(Job(ref, instr.text, hand, k, max_candidates, protocol))
+        objects += [(s, name) for s in chosen if s < start_seed + objects_per_category]
+    order = {name: i for i, name in enumerate(names)}
+    jobs = []
+    for seed, name in sorted(objects, key=lambda o: (o[0], order[o[1]])):
+        ref = {"category": name, "seed": seed}
+        for hand in hands:
+            for instr in instructions(name):
+                for k in range(variants):
+                    job = Job(ref, instr.text, hand, k, max_candidates, protocol)
+                    jobs.append(replace(job, validate_all=validate_all))
     return jobs

@@ -61,10 +61,13 @@ def job_object(job: Job) -> ObjectModel:
 
 
 @lru_cache(maxsize=64)
-def cached_planner(hand: str, max_candidates: int, protocol: str, variant: int) -> VariantPlanner:
-    return VariantPlanner(
-        hand, PlannerSettings(max_candidates=max_candidates, protocol=protocol), variant
+def cached_planner(
+    hand: str, max_candidates: int, protocol: str, variant: int, validate_all: bool
+) -> VariantPlanner:
+    settings = PlannerSettings(
+        max_candidates=max_candidates, protocol=protocol, validate_all=validate_all
     )
+    return VariantPlanner(hand, settings, variant)
 
 
 def _grasp_record(grasp: Grasp | None) -> dict[str, Any] | None:
@@ -85,13 +88,15 @@ def solve_job(job: Job) -> dict[str, Any]:
     times: dict[str, float] = {}
     if job.source is not None:
         return _transfer(job, obj, instruction.part, times)
-    planner = cached_planner(job.hand, job.max_candidates, job.protocol, job.variant)
+    planner = cached_planner(
+        job.hand, job.max_candidates, job.protocol, job.variant, job.validate_all
+    )
     result = planner.plan(obj, instruction)
     for key, value in result.stage_times().items():
         times[key] = float(value)
     best = result.best
     validation = _strip_measured(None if best is None else best.validation, times)
-    return {
+    record = {
         "success": bool(result.success),
         "part_voted": result.part_touched,
         "part_instructed": instruction.part,
@@ -105,6 +110,18 @@ def solve_job(job: Job) -> dict[str, Any]:
         "notes": list(result.notes),
         "times": times,
     }
+    if job.validate_all:  # every holding grasp on the part, the returned one first
+        record["holding"] = [
+            {
+                "proposal": planner.proposal_index(c.rank),
+                "anchor_error": float(c.solve.anchor_error),
+                "min_distance": float(c.solve.min_distance),
+                "validation": jsonable(_strip_measured(c.validation, {})),
+                "grasp": _grasp_record(c.grasp),
+            }
+            for c in result.holding
+        ]
+    return record
 
 
 def _transfer(job: Job, obj: ObjectModel, part: str, times: dict[str, float]) -> dict[str, Any]:

@@ -26,6 +26,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     g.add_argument("out", metavar="OUT_DIR")
     g.add_argument("--work", metavar="DIR", help="jobs and result shards (default OUT_DIR/work)")
     add_job_arguments(g, splits=["train", "val", "test", "heldout"], variants=3)
+    g.add_argument(
+        "--first-only",
+        action="store_true",
+        help="keep only each job's first holding grasp (default: validate every candidate "
+        "and keep all that hold on the part)",
+    )
     g.add_argument("--no-transfer", action="store_true", help="skip cross-hand transfers")
     g.add_argument(
         "--transfer-per-pair",
@@ -64,6 +70,7 @@ def run_generate(args: argparse.Namespace) -> int:
         variants=args.variants,
         max_candidates=args.candidates,
         protocol=args.preset,
+        validate_all=not args.first_only,
         transfer=not args.no_transfer,
         transfer_per_pair=args.transfer_per_pair,
         workers=args.workers,
