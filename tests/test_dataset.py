@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -133,3 +134,23 @@ def test_generate_a_tiny_real_dataset(tmp_path):
     assert again == info
     ds = GraspDataset(tmp_path / "ds", "train")
     assert ds[0]["metrics"][2] < 0.05  # held within 5 cm
+
+
+def test_every_holding_grasp_of_a_validate_all_job_is_kept(tmp_path):
+    from planner.batch.dataset import collect
+
+    job = make_jobs(hands=["allegro"], category_names=["mug"], objects_per_category=1)[0]
+    assert "validate_all" not in job.to_dict()  # old jobs files keep their digests
+    record = fake_grasp_solve(job)
+    other = fake_grasp_solve(replace(job, variant=1, id=""))
+    entry = {k: record[k] for k in ("anchor_error", "min_distance", "validation", "grasp")}
+    second = {**entry, "grasp": other["grasp"]}
+    job_dict = replace(job, validate_all=True).to_dict()
+    assert job_dict["validate_all"] is True
+    with_all = {**record, "job": job_dict, "holding": [entry, second, entry]}
+    rows, stats = collect([with_all])
+    assert len(rows) == 2  # the repeated entry is a duplicate
+    assert stats.grasps["plan:allegro"] == 3 and stats.kept["plan:allegro"] == 2
+    assert stats.valid["plan:allegro"] == 1
+    none_held = {**with_all, "holding": []}
+    assert collect([none_held])[0] == []

@@ -40,6 +40,26 @@ def test_moved_grasp_no_longer_holds():
     assert not validate(light, pieces, "allegro", "paper").success
 
 
+def test_validate_all_keeps_every_holding_candidate():
+    from dataclasses import replace
+
+    from planner.functional import PlannerSettings
+
+    obj = make_object("mug", 3)
+    settings = PlannerSettings(max_candidates=4)
+    first = FunctionalPlanner("allegro", settings).plan(obj, "Hold a mug by body")
+    every = FunctionalPlanner("allegro", replace(settings, validate_all=True)).plan(
+        obj, "Hold a mug by body"
+    )
+    assert first.success and every.success
+    assert every.best.rank == first.best.rank  # the same grasp is returned
+    validated = [c for c in every.candidates if c.order is not None]
+    assert len(validated) == min(4, sum(c.solve.ok for c in every.candidates))
+    assert every.holding[0] is every.best
+    assert all(c.success and c.part == "body" for c in every.holding)
+    assert len(every.holding) >= len(first.holding) == 1
+
+
 def test_voting_rule_majority_and_far_fingertips():
     points = np.array([[0, 0, 0], [0.1, 0, 0]], dtype=float)
     labels = np.array([0, 1])
