@@ -13,8 +13,9 @@ import argparse
 import json
 import statistics
 import time
+from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 from tqdm import tqdm
@@ -53,15 +54,31 @@ def pairs(split: str, per_category: int, hands: list[str]) -> list[tuple[str, st
     return out
 
 
-_PLANNERS: dict[tuple[str, int], FunctionalPlanner] = {}
+_PLANNERS: dict[str, FunctionalPlanner] = {}
 
 
-def run_pair(args: tuple[str, str, int, str, int]) -> PairRecord:
-    hand, cat, seed, text, max_candidates = args
-    key = (hand, max_candidates)
-    if key not in _PLANNERS:
-        _PLANNERS[key] = FunctionalPlanner(hand, PlannerSettings(max_candidates=max_candidates))
-    planner = _PLANNERS[key]
+def planner_settings(max_candidates: int, overrides: Sequence[str] = ()) -> PlannerSettings:
+    """PlannerSettings with `field=value` overrides; `program.field=value` sets ProgramSettings."""
+    settings = PlannerSettings(max_candidates=max_candidates)
+    for item in overrides:
+        key, sep, text = item.partition("=")
+        target = settings.program if key.startswith("program.") else settings
+        name = key.removeprefix("program.")
+        if not sep or name not in target.__dataclass_fields__:
+            raise SystemExit(f"--set {item!r}: expected FIELD=VALUE with a PlannerSettings field")
+        value = type(getattr(target, name))(text if text not in ("False", "false") else "")
+        if target is settings:
+            settings = replace(settings, **{name: value})
+        else:
+            settings = replace(settings, program=replace(settings.program, **{name: value}))
+    return settings
+
+
+def run_pair(args: tuple[str, str, int, str, int, tuple[str, ...]]) -> PairRecord:
+    hand, cat, seed, text, max_candidates, overrides = args
+    if hand not in _PLANNERS:
+        _PLANNERS[hand] = FunctionalPlanner(hand, planner_settings(max_candidates, overrides))
+    planner = _PLANNERS[hand]
     obj = make_object(cat, seed)
     part = text.rsplit(" by ", 1)[1]
     start = time.perf_counter()
@@ -134,9 +151,18 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--limit", type=int, default=None, help="first N pairs only (quick look)")
     parser.add_argument("--out", type=Path, default=None, help="write per-pair records (JSONL)")
+    parser.add_argument(
+        "--set",
+        nargs="*",
+        default=[],
+        metavar="FIELD=VALUE",
+        help="planner setting overrides, e.g. solve_batch=2 program.major_iterations=60",
+    )
     args = parser.parse_args()
+    planner_settings(args.candidates, args.set)  # fail early on a bad override
     jobs = [
-        (*p, args.candidates) for p in pairs(args.split, args.objects_per_category, args.hands)
+        (*p, args.candidates, tuple(args.set))
+        for p in pairs(args.split, args.objects_per_category, args.hands)
     ][: args.limit]
     records: list[PairRecord] = []
     with ProcessPoolExecutor(args.workers) as pool:
@@ -147,6 +173,7 @@ def main() -> None:
     print(
         f"split {args.split}, {args.objects_per_category} objects per category, "
         f"up to {args.candidates} candidates, paper validation preset"
+        + (f", settings {' '.join(args.set)}" if args.set else "")
     )
     print_table(summarize(records))
 

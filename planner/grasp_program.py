@@ -107,7 +107,9 @@ class GraspProgram:
     def __post_init__(self) -> None:
         builder = DiagramBuilder()
         plant, scene_graph = AddMultibodyPlantSceneGraph(builder, 0.0)
-        self.handle = self.hand.add_to_plant(plant, scene_graph, filter_self_collisions=False)
+        self.handle = self.hand.add_to_plant(
+            plant, scene_graph, filter_self_collisions=False, merge_hull_links=True
+        )
         world = plant.world_body()
         for i, piece in enumerate(self.obj.pieces):
             plant.RegisterCollisionGeometry(

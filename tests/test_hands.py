@@ -31,10 +31,15 @@ def random_configs(hand, n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]
     return wrist, q
 
 
-def drake_hand(hand, filter_self_collisions=True):
+def drake_hand(hand, filter_self_collisions=True, merge_hull_links=False):
     builder = DiagramBuilder()
     plant, scene_graph = AddMultibodyPlantSceneGraph(builder, 0.0)
-    handle = hand.add_to_plant(plant, scene_graph, filter_self_collisions=filter_self_collisions)
+    handle = hand.add_to_plant(
+        plant,
+        scene_graph,
+        filter_self_collisions=filter_self_collisions,
+        merge_hull_links=merge_hull_links,
+    )
     plant.Finalize()
     diagram = builder.Build()
     context = plant.GetMyContextFromRoot(diagram.CreateDefaultContext())
@@ -216,3 +221,33 @@ def test_cli_unknown_hand_is_a_clear_error():
     )
     assert out.returncode == 2
     assert "unknown hand 'nohand'" in out.stderr and "Traceback" not in out.stderr
+
+
+def test_program_hulls_contain_the_link_boxes_and_leave_the_open_pose_free(hand_name):
+    """Merged link hulls (hand.json program_hull_links) replace the boxes, are conservative
+    (every point is at least as close to them), and leave the open pose free of self-collision."""
+    hand = load_hand(hand_name)
+    plain, plain_handle, plain_context = drake_hand(hand, filter_self_collisions=False)
+    plant, handle, context = drake_hand(hand, filter_self_collisions=False, merge_hull_links=True)
+    merged = len(handle.geometry_ids)
+    boxes = sum(
+        sum(g.kind == "box" for g in hand.tree.geoms[link]) for link in hand.meta.program_hull_links
+    )
+    assert merged == plain.num_collision_geometries() - boxes + len(hand.meta.program_hull_links)
+    # conservative: no point is closer to the boxes than to the hulls
+    rng = np.random.default_rng(1)
+    wrist, q = np.array([0, 0, 0, 1.0, 0, 0, 0]), (hand.lower + hand.upper) / 2
+    points = rng.uniform(-0.12, 0.12, (300, 3))
+    distances = []
+    for p, h, c in ((plain, plain_handle, plain_context), (plant, handle, context)):
+        h.set_state(p, c, wrist, q)
+        query = p.get_geometry_query_input_port().Eval(c)
+        distances.append(
+            [min(d.distance for d in query.ComputeSignedDistanceToPoint(x)) for x in points]
+        )
+    assert np.all(np.array(distances[1]) <= np.array(distances[0]) + 1e-9)
+    open_q = np.array([hand.meta.open_pose[j] for j in hand.joint_names])
+    handle.set_state(plant, context, np.array([0, 0, 0, 1.0, 0, 0, 0]), open_q)
+    query = plant.get_geometry_query_input_port().Eval(context)
+    pairs = query.ComputeSignedDistancePairwiseClosestPoints(0.0)
+    assert not [(p.id_A, p.id_B, p.distance) for p in pairs if p.distance < 0]

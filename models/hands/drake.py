@@ -4,17 +4,27 @@ Drake filters only parent-child collision pairs. The hand.json ignore list (neig
 geometry overlaps by design) is always filtered; the other hand-hand pairs are filtered too
 unless `filter_self_collisions=False`. The grasp program keeps them: with every hand-hand pair
 filtered, solutions put fingers through each other and MuJoCo then pushes the object away.
+
+With `merge_hull_links`, the boxes of each link named in hand.json `program_hull_links` become
+one convex hull (it contains them, so a hull without penetration means boxes without it too):
+LEAP's 71 vendor boxes become 21 shapes and each signed-distance query has far fewer pairs.
 """
 
 from __future__ import annotations
 
+import xml.etree.ElementTree as ET
 from functools import cached_property
 
 import numpy as np
 from pydrake.common.eigen_geometry import Quaternion
-from pydrake.geometry import CollisionFilterDeclaration, GeometrySet
+from pydrake.geometry import CollisionFilterDeclaration, Convex, GeometrySet
 from pydrake.math import RigidTransform
 from pydrake.multibody.parsing import Parser
+from pydrake.multibody.plant import CoulombFriction
+
+from models.errors import HandError
+
+_CORNERS = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=float)
 
 
 class DrakeHand:
@@ -58,15 +68,51 @@ class DrakeHand:
         plant.SetPositions(context, positions)
 
 
+def _box_corners(hand, link: str) -> np.ndarray:
+    """Corners (N, 3) of the link's collision boxes in the link frame."""
+    boxes = [g for g in hand.tree.geoms.get(link, []) if g.kind == "box"]
+    if len(boxes) < 2:
+        raise HandError(
+            f"hand {hand.name}: program_hull_links names {link!r}, which has {len(boxes)} "
+            "collision boxes; list only links with several boxes"
+        )
+    corners = [(_CORNERS * np.asarray(g.size)) @ g.pose[:3, :3].T + g.pose[:3, 3] for g in boxes]
+    return np.concatenate(corners)
+
+
+def _urdf_without_boxes(hand, links: tuple[str, ...]) -> str:
+    """The hand's URDF text with the collision boxes of `links` removed."""
+    root = ET.parse(hand.urdf_path).getroot()
+    for elem in root.findall("link"):
+        if elem.get("name") not in links:
+            continue
+        for col in elem.findall("collision"):
+            if col.find("geometry/box") is not None:
+                elem.remove(col)
+    return ET.tostring(root, encoding="unicode")
+
+
 def add_hand_to_plant(
-    hand, plant, scene_graph=None, filter_self_collisions: bool = True
+    hand, plant, scene_graph=None, filter_self_collisions: bool = True, merge_hull_links=False
 ) -> DrakeHand:
     """Parse the hand's URDF into `plant` (not yet finalized); call `plant.Finalize()` after
     adding everything else."""
     parser = Parser(plant)
     parser.SetAutoRenaming(True)
-    (instance,) = parser.AddModels(str(hand.urdf_path))
+    hulls = hand.meta.program_hull_links if merge_hull_links else ()
+    if hulls:
+        (instance,) = parser.AddModelsFromString(_urdf_without_boxes(hand, hulls), "urdf")
+    else:
+        (instance,) = parser.AddModels(str(hand.urdf_path))
     bodies = {name: plant.GetBodyByName(name, instance) for name in hand.link_names}
+    for link in hulls:
+        plant.RegisterCollisionGeometry(
+            bodies[link],
+            RigidTransform(),
+            Convex(_box_corners(hand, link).T, f"{hand.name}_{link}_hull"),
+            f"{link}_hull",
+            CoulombFriction(1.0, 1.0),
+        )
     geometry_ids = [g for b in bodies.values() for g in plant.GetCollisionGeometriesForBody(b)]
     if scene_graph is not None:
         manager = scene_graph.collision_filter_manager()

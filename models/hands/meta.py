@@ -67,6 +67,9 @@ class HandMeta:
     joint_damping: float  # simulation joint dynamics (vendor values; URDF cannot hold armature)
     joint_armature: float
     joint_frictionloss: float
+    # Links whose several boxes the grasp program merges into one convex hull (a bounding,
+    # so still conservative, shape): fewer collision pairs, faster solves. MuJoCo keeps the boxes.
+    program_hull_links: tuple[str, ...]
     source: str  # where the kinematics come from (for provenance and vendor checks)
 
     def fingertip(self, name: str) -> Fingertip:
@@ -141,5 +144,6 @@ def read_meta(path: Path) -> HandMeta:
         joint_damping=float(raw.get("joint_dynamics", {}).get("damping", 0.0)),
         joint_armature=float(raw.get("joint_dynamics", {}).get("armature", 0.0)),
         joint_frictionloss=float(raw.get("joint_dynamics", {}).get("frictionloss", 0.0)),
+        program_hull_links=tuple(raw.get("program_hull_links", ())),
         source=raw.get("source", ""),
     )

@@ -144,11 +144,18 @@ class HandModel:
         )
 
     # ---- simulators ---------------------------------------------------------------------
-    def add_to_plant(self, plant, scene_graph=None, *, filter_self_collisions: bool = True):
+    def add_to_plant(
+        self,
+        plant,
+        scene_graph=None,
+        *,
+        filter_self_collisions: bool = True,
+        merge_hull_links: bool = False,
+    ):
         """Add the hand (floating wrist) to a Drake MultibodyPlant; see models.hands.drake."""
         from models.hands.drake import add_hand_to_plant
 
-        return add_hand_to_plant(self, plant, scene_graph, filter_self_collisions)
+        return add_hand_to_plant(self, plant, scene_graph, filter_self_collisions, merge_hull_links)
 
     def mujoco_spec(self):
         """A fresh mujoco.MjSpec of the hand; see models.hands.mujoco_spec."""
