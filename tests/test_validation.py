@@ -98,6 +98,19 @@ def test_shared_closing_equals_per_direction_closing(rows, hand):
 
 
 @needs_reference
+def test_sparse_jacobian_matches_mujoco_default(rows, hand):
+    # the speed setting stores the same equations differently: only round-off may differ
+    short = get_protocol("dexgraspbench", hold_time=0.4, all_directions=True)
+    grasp, obj, pose = reference_case(rows, hand, first(rows, True))
+    sparse = validate(grasp, obj, hand, short, object_pose=pose)
+    auto = validate(grasp, obj, hand, short.replace(jacobian="auto"), object_pose=pose)
+    assert sparse.success == auto.success
+    for a, b in zip(sparse.directions, auto.directions, strict=True):
+        assert a.translation == pytest.approx(b.translation, abs=1e-5)
+        assert a.rotation_deg == pytest.approx(b.rotation_deg, abs=0.01)
+
+
+@needs_reference
 def test_early_stop_and_all_directions(rows, hand):
     grasp, obj, pose = reference_case(rows, hand, first(rows, False))
     early = validate(grasp, obj, hand, object_pose=pose)
@@ -160,6 +173,8 @@ def test_protocol_presets_and_overrides():
         get_protocol("paper", hold=3)
     with pytest.raises(ProtocolError, match="positive"):
         get_protocol("paper", timestep=0)
+    with pytest.raises(ProtocolError, match="unknown jacobian"):
+        get_protocol("paper", jacobian="banded")
 
 
 def test_object_inputs_are_normalized():

@@ -33,6 +33,11 @@ _SOLVERS = {
     "pgs": mujoco.mjtSolver.mjSOL_PGS,
 }
 _CONES = {"elliptic": mujoco.mjtCone.mjCONE_ELLIPTIC, "pyramidal": mujoco.mjtCone.mjCONE_PYRAMIDAL}
+_JACOBIANS = {
+    "dense": mujoco.mjtJacobian.mjJAC_DENSE,
+    "sparse": mujoco.mjtJacobian.mjJAC_SPARSE,
+    "auto": mujoco.mjtJacobian.mjJAC_AUTO,
+}
 
 
 @dataclass
@@ -59,6 +64,7 @@ def _configure(spec: mujoco.MjSpec, protocol: Protocol) -> None:
     opt.integrator = _INTEGRATORS[protocol.integrator]
     opt.solver = _SOLVERS[protocol.solver]
     opt.cone = _CONES[protocol.cone]
+    opt.jacobian = _JACOBIANS[protocol.jacobian]
     opt.impratio = protocol.impratio
     opt.noslip_iterations = protocol.noslip_iterations
     opt.disableflags = 0 if protocol.gravity else int(mujoco.mjtDisableBit.mjDSBL_GRAVITY)

@@ -156,7 +156,10 @@ def _move(
     ctrls: tuple[np.ndarray, np.ndarray],
     protocol: Protocol,
 ) -> None:
-    """Drive mocap and actuator targets from one configuration to the next in waypoints."""
+    """Drive mocap and actuator targets from one configuration to the next in waypoints.
+
+    No mj_forward after setting the targets: mj_step runs it first (same result, bit for bit).
+    """
     m, n = scene.model, protocol.waypoints
     poses = _interpolate(wrists[0], wrists[1], n)
     targets = np.linspace(ctrls[0], ctrls[1], n + 1)[1:]
@@ -164,9 +167,7 @@ def _move(
         data.mocap_pos[scene.mocap] = poses[k, :3]
         data.mocap_quat[scene.mocap] = poses[k, 3:]
         data.ctrl[:] = targets[k]
-        mujoco.mj_forward(m, data)
-        for _ in range(protocol.substeps):
-            mujoco.mj_step(m, data)
+        mujoco.mj_step(m, data, nstep=protocol.substeps)
 
 
 def _close(
@@ -179,7 +180,6 @@ def _close(
     cmap = _ctrl_map(scene, data)
     ctrls = [cmap @ grasp.pregrasp, cmap @ grasp.grasp, cmap @ grasp.squeeze]
     data.ctrl[:] = ctrls[0]
-    mujoco.mj_forward(scene.model, data)
     _move(scene, data, (wrists[0], wrists[1]), (ctrls[0], ctrls[1]), protocol)
     _move(scene, data, (wrists[1], wrists[2]), (ctrls[1], ctrls[2]), protocol)
     return 2 * protocol.waypoints * protocol.substeps * protocol.timestep
@@ -205,8 +205,7 @@ def _hold(
     checks_done = 0
     at_rest = 0
     for _ in range(protocol.checks):
-        for _ in range(protocol.steps_per_check):
-            mujoco.mj_step(m, data)
+        mujoco.mj_step(m, data, nstep=protocol.steps_per_check)
         checks_done += 1
         translation, rotation = _displacement(obj_pose, data.qpos[q : q + 7])
         if not (translation < protocol.max_translation and rotation < protocol.max_rotation_deg):
