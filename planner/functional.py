@@ -201,6 +201,9 @@ class FunctionalPlanner:
         geo = self.geometry
         spacing = min(geo.spacing, max((t.max() - t.min()) / 3, 0.005))
         tree = cKDTree(points)
+        # Anchors sit on the part as near the object's centre of mass as the part allows: a
+        # handle held at its far end lets gravity twist a knife or pan out of the fingers.
+        t_mass = float((points.mean(axis=0) - centre) @ e1)
         proposals = []
         for theta in np.deg2rad(np.arange(0, 360, self.settings.approach_step_deg)):
             v = np.cos(theta) * e2 + np.sin(theta) * e3  # palm -> object, across the long axis
@@ -209,16 +212,18 @@ class FunctionalPlanner:
                     [v, lateral_sign * e1], [geo.normal, geo.lateral], weights=[10, 1]
                 )
                 u = rot.apply(geo.opposition)  # thumb -> fingers, in the world
-                proposals.append(self._proposal(pts, nrm, t, centre, rot, u, v, e1, spacing, tree))
+                proposals.append(
+                    self._proposal(pts, nrm, t, t_mass, centre, rot, u, v, e1, spacing, tree)
+                )
         proposals.sort(key=lambda p: -p.score)
         return proposals[: self.settings.max_proposals]
 
-    def _proposal(self, pts, nrm, t, centre, rot, u, v, e1, spacing, tree) -> Proposal:
+    def _proposal(self, pts, nrm, t, t_mass, centre, rot, u, v, e1, spacing, tree) -> Proposal:
         geo = self.geometry
         lateral_sign = np.sign(rot.apply(geo.lateral) @ e1) or 1.0
         half_width = max(0.006, 0.15 * (t.max() - t.min()))
         t_mid = (
-            float(np.clip(0.0, t.min() + spacing, t.max() - spacing))
+            float(np.clip(t_mass, t.min() + spacing, t.max() - spacing))
             if np.ptp(t) > 2 * spacing
             else 0.0
         )

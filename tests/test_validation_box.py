@@ -15,7 +15,7 @@ from models.objects.loading import from_mesh
 from planner.functional import FunctionalPlanner
 from planner.validation import validate
 
-BOXES = ([0.05, 0.05, 0.1], [0.04, 0.04, 0.1], [0.06, 0.04, 0.1])
+BOXES = ([0.05, 0.05, 0.1], [0.04, 0.04, 0.1], [0.06, 0.04, 0.1], [0.035, 0.035, 0.1])
 
 
 def _box(extents):
