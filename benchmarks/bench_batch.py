@@ -20,13 +20,18 @@ from planner.batch import Job, make_jobs, read_results, run_batch
 
 def bench_jobs(n: int, candidates: int) -> list[Job]:
     """n jobs spread evenly over categories, hands and instructions (one variant each)."""
-    every = make_jobs(
-        splits=["train"],
-        category_names=["mug", "bottle", "knife", "hammer", "bowl", "pan"],
-        objects_per_category=1,
-        variants=1,
-        max_candidates=candidates,
-    )
+    per_category = 1
+    while True:  # enough train objects that n jobs can be spread over them
+        every = make_jobs(
+            splits=["train"],
+            category_names=["mug", "bottle", "knife", "hammer", "bowl", "pan"],
+            objects_per_category=per_category,
+            variants=1,
+            max_candidates=candidates,
+        )
+        if len(every) >= n or per_category > 50:
+            break
+        per_category += 1
     step = max(len(every) // n, 1)
     return every[::step][:n]
 

@@ -49,6 +49,7 @@ class ProgramSettings:
     major_optimality: float = 1e-3
     major_feasibility: float = 1e-5
     major_iterations: int = 150
+    squeeze_depth: float = 1.0  # squeeze = grasp + depth x (grasp - pregrasp); 1 is BODex's rule
 
 
 @dataclass
@@ -345,8 +346,10 @@ class GraspProgram:
         return open_q.copy()
 
     def squeeze(self, q: np.ndarray, pregrasp: np.ndarray) -> np.ndarray:
-        """BODex's rule: squeeze = 2 x grasp - pregrasp, within joint limits."""
-        return np.clip(2 * q - pregrasp, self.hand.lower, self.hand.upper)
+        """BODex's rule, squeeze = 2 x grasp - pregrasp (squeeze_depth 1), within joint limits:
+        the position targets past the contacts are what make the fingers press."""
+        depth = self.settings.squeeze_depth
+        return np.clip((1 + depth) * q - depth * pregrasp, self.hand.lower, self.hand.upper)
 
 
 _PROGRAMS: dict[tuple, GraspProgram] = {}
