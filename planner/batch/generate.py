@@ -6,6 +6,8 @@ intermediate jobs files and result shards live in a work folder beside the datas
 
 from __future__ import annotations
 
+import json
+import subprocess
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -39,6 +41,41 @@ class GenerateSettings:
     progress: bool = True
 
 
+def code_version() -> str:
+    """The git commit of this checkout (+"-dirty" with uncommitted changes outside data/), or
+    the installed package version when not in a git checkout."""
+    root = Path(__file__).resolve().parents[2]
+    try:
+        git = ["git", "-C", str(root)]
+        commit = subprocess.run(
+            [*git, "rev-parse", "--short", "HEAD"], capture_output=True, text=True, check=True
+        ).stdout.strip()
+        changes = subprocess.run(
+            [*git, "status", "--porcelain", "--", ".", ":!data"],
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout.strip()
+        return commit + ("-dirty" if changes else "")
+    except (OSError, subprocess.CalledProcessError):
+        from importlib.metadata import PackageNotFoundError, version
+
+        try:
+            return "drograsp " + version("drograsp")
+        except PackageNotFoundError:
+            return "unknown"
+
+
+def _record_code(work: Path) -> list[str]:
+    """Every code version that has worked in `work` (a resumed run may span several)."""
+    path = work / "code.json"
+    versions = json.loads(path.read_text()) if path.is_file() else []
+    if code_version() not in versions:
+        versions.append(code_version())
+        path.write_text(json.dumps(versions) + "\n")
+    return versions
+
+
 def generate_dataset(
     out: str | Path,
     settings: GenerateSettings,
@@ -52,6 +89,7 @@ def generate_dataset(
     work.mkdir(parents=True, exist_ok=True)
     if work.resolve().parent == out.resolve():
         (out / ".gitignore").write_text(f"{work.name}/\n")  # shards are not part of the dataset
+    code = _record_code(work)
     jobs_file = work / "jobs.jsonl"
     jobs = make_jobs(
         hands=s.hands,
@@ -81,4 +119,4 @@ def generate_dataset(
         write_jobs(transfers, work / "transfer_jobs.jsonl")
         run_batch(transfers, work / "transfer", **run)
         dirs.append(work / "transfer")
-    return compact(dirs, out, command)
+    return compact(dirs, out, command, code)
