@@ -41,9 +41,12 @@ class GenerateSettings:
     progress: bool = True
 
 
+CODE_DIRS = ("models", "learned", "planner", "eval")
+
+
 def code_version() -> str:
-    """The git commit of this checkout (+"-dirty" with uncommitted changes outside data/), or
-    the installed package version when not in a git checkout."""
+    """The git commit of this checkout (+"-dirty" with uncommitted changes to the code
+    packages), or the installed package version when not in a git checkout."""
     root = Path(__file__).resolve().parents[2]
     try:
         git = ["git", "-C", str(root)]
@@ -51,7 +54,7 @@ def code_version() -> str:
             [*git, "rev-parse", "--short", "HEAD"], capture_output=True, text=True, check=True
         ).stdout.strip()
         changes = subprocess.run(
-            [*git, "status", "--porcelain", "--", ".", ":!data"],
+            [*git, "status", "--porcelain", "--", *CODE_DIRS],
             capture_output=True,
             text=True,
             check=True,
