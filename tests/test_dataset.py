@@ -134,6 +134,8 @@ def test_generate_a_tiny_real_dataset(tmp_path):
     assert again == info
     ds = GraspDataset(tmp_path / "ds", "train")
     assert ds[0]["metrics"][2] < 0.05  # held within 5 cm
+    meta = json.loads((tmp_path / "ds" / "meta.json").read_text())
+    assert meta["code"] and meta["code"][0] in (tmp_path / "ds" / "card.md").read_text()
 
 
 def test_every_holding_grasp_of_a_validate_all_job_is_kept(tmp_path):

@@ -60,6 +60,16 @@ def test_validate_all_keeps_every_holding_candidate():
     assert len(every.holding) >= len(first.holding) == 1
 
 
+def test_benchmark_setting_overrides():
+    from eval.planner_benchmark import planner_settings
+
+    s = planner_settings(4, ["program.major_iterations=60", "use_palm=False", "min_quality=0.01"])
+    assert s.max_candidates == 4 and s.program.major_iterations == 60
+    assert s.use_palm is False and s.min_quality == 0.01
+    with pytest.raises(SystemExit, match="FIELD=VALUE"):
+        planner_settings(4, ["colour=red"])
+
+
 def test_voting_rule_majority_and_far_fingertips():
     points = np.array([[0, 0, 0], [0.1, 0, 0]], dtype=float)
     labels = np.array([0, 1])
