@@ -54,6 +54,7 @@ class PlannerSettings:
     # holds on the part: solves are already paid for, so each extra validation is the cheapest
     # way to another grasp (dataset generation keeps them all, see PlanResult.holding).
     validate_all: bool = False
+    mass_centred: bool = True  # anchors near the object's centre of mass along the part
     program: ProgramSettings = field(default_factory=ProgramSettings)
 
 
@@ -203,7 +204,7 @@ class FunctionalPlanner:
         tree = cKDTree(points)
         # Anchors sit on the part as near the object's centre of mass as the part allows: a
         # handle held at its far end lets gravity twist a knife or pan out of the fingers.
-        t_mass = float((points.mean(axis=0) - centre) @ e1)
+        t_mass = float((points.mean(axis=0) - centre) @ e1) if self.settings.mass_centred else 0.0
         proposals = []
         for theta in np.deg2rad(np.arange(0, 360, self.settings.approach_step_deg)):
             v = np.cos(theta) * e2 + np.sin(theta) * e3  # palm -> object, across the long axis
