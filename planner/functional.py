@@ -34,7 +34,7 @@ from planner.grasp_program import (
     grasp_program,
 )
 from planner.labels import voted_part
-from planner.quality import epsilon_quality
+from planner.quality import epsilon_quality, task_quality
 from planner.validation import validate
 
 
@@ -55,6 +55,7 @@ class PlannerSettings:
     # way to another grasp (dataset generation keeps them all, see PlanResult.holding).
     validate_all: bool = False
     mass_centred: bool = True  # anchors near the object's centre of mass along the part
+    ranking: str = "task"  # validation order: "task" or "epsilon" (planner.quality)
     program: ProgramSettings = field(default_factory=ProgramSettings)
 
 
@@ -78,6 +79,7 @@ class CandidateResult:
     part: str | None = None
     validation: dict[str, Any] | None = None
     quality: float = -1.0  # epsilon (force-closure) quality of the solved contacts
+    task_quality: float = -1.0  # largest test force the contacts resist (planner.quality)
     order: int | None = None  # position in the validation order, if validated
     times: dict[str, float] = field(default_factory=dict)
 
@@ -293,7 +295,7 @@ class FunctionalPlanner:
 
         def try_in_order(cands: list[CandidateResult]) -> bool:
             nonlocal position
-            for cand in sorted(cands, key=lambda c: (-c.quality, c.rank)):
+            for cand in sorted(cands, key=self._order_key):
                 if position >= self.settings.max_candidates:
                     return False
                 cand.order = position
@@ -333,6 +335,14 @@ class FunctionalPlanner:
             return PlanResult(instruction, self.hand.name, fallback.grasp, candidates, notes)
         return PlanResult(instruction, self.hand.name, None, candidates, notes)
 
+    def _order_key(self, cand: CandidateResult) -> tuple[float, int]:
+        """Validation order within a batch: best quality first, then proposal rank."""
+        if self.settings.ranking == "epsilon":
+            return (-cand.quality, cand.rank)
+        if self.settings.ranking == "task":
+            return (-cand.task_quality, cand.rank)
+        raise PlanningError(f"unknown ranking {self.settings.ranking!r}; use 'task' or 'epsilon'")
+
     def _solve(self, program, obj, rank, proposal) -> CandidateResult:
         """Solve one proposal and score its contacts (epsilon quality at the grasp)."""
         solved = program.solve(
@@ -351,6 +361,7 @@ class FunctionalPlanner:
                 solved.wrist, solved.q, self.settings.contact_distance
             )
             cand.quality = epsilon_quality(points, inward, obj.points.mean(axis=0))
+            cand.task_quality = task_quality(points, inward, obj.points.mean(axis=0))
             cand.times["quality"] = time.perf_counter() - t0
         return cand
 

@@ -1,5 +1,6 @@
-"""Grasp quality from contacts: the epsilon metric (Ferrari-Canny) used to rank solved
-candidates before the costlier MuJoCo validation.
+"""Grasp quality from contacts, used to rank solved candidates before the costlier MuJoCo
+validation: the epsilon metric (Ferrari-Canny) and a task metric for the validator's own test
+(a force at the centre of mass along +-x, +-y, +-z).
 
 A contact pushes along the object's inward normal within a friction cone (a pyramid of
 `edges` generators); the grasp wrench space is the convex hull of every generator's wrench
@@ -58,3 +59,38 @@ def epsilon_quality(
         return -1.0
     # hull.equations: normal . x + offset <= 0 inside; distance of the origin to each facet
     return float(np.min(-hull.equations[:, -1]))
+
+
+AXES = np.concatenate([np.eye(3), -np.eye(3)])
+
+
+def task_quality(
+    points: np.ndarray,
+    inward_normals: np.ndarray,
+    centre: np.ndarray,
+    directions: np.ndarray = AXES,
+    mu: float = 0.6,
+    edges: int = 6,
+) -> float:
+    """The smallest, over `directions`, of the largest pure force along it (at `centre`, no
+    torque) inside the contact wrench hull of unit-force cone edges. Unlike epsilon it weighs
+    torques only by what these forces demand of them (a far-off centre of mass costs quality),
+    and does not depend on a characteristic length. <= 0: some direction cannot be resisted."""
+    points = np.asarray(points, dtype=float)
+    if len(points) < 2:
+        return -1.0
+    wrenches = friction_wrenches(points, np.asarray(inward_normals), centre, mu, edges, 1.0)
+    try:
+        hull = ConvexHull(wrenches)
+    except QhullError:
+        return -1.0
+    normals, offsets = hull.equations[:, :-1], hull.equations[:, -1]
+    if np.any(offsets > 0):  # the origin lies outside: no force closure at all
+        return -float(np.max(offsets))
+    reach = []
+    for d in np.asarray(directions, dtype=float):
+        w = np.concatenate([d / np.linalg.norm(d), np.zeros(3)])
+        along = normals @ w
+        ahead = along > 1e-12
+        reach.append(float(np.min(-offsets[ahead] / along[ahead])) if ahead.any() else np.inf)
+    return float(min(reach))

@@ -190,3 +190,14 @@ def test_demo_lists_every_hand(tmp_path):
     assert "allegro" in run.stdout and "Use a mug by handle" in run.stdout
     assert (tmp_path / "index.html").exists()
     assert json.loads((tmp_path / "allegro_bottle_1.json").read_text())["hand"] == "allegro"
+
+
+def test_task_quality_needs_closure_and_falls_with_a_far_centre_of_mass():
+    from planner.quality import task_quality
+
+    points = np.array([[0.02, 0, 0], [-0.02, 0, 0], [0, 0.02, 0], [0, -0.02, 0]])
+    inward = -points / 0.02
+    centred = task_quality(points, inward, np.zeros(3))
+    assert centred > 0
+    assert task_quality(points[:2], inward[:2], np.zeros(3)) < 0  # a pinch: no closure
+    assert 0 < task_quality(points, inward, np.array([0, 0, 0.05])) < centred
