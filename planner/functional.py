@@ -34,7 +34,7 @@ from planner.grasp_program import (
     grasp_program,
 )
 from planner.labels import voted_part
-from planner.quality import epsilon_quality, task_quality
+from planner.quality import contact_quality
 from planner.validation import validate
 
 
@@ -57,6 +57,13 @@ class PlannerSettings:
     mass_centred: bool = True  # anchors near the object's centre of mass along the part
     ranking: str = "task"  # validation order: "task" or "epsilon" (planner.quality)
     program: ProgramSettings = field(default_factory=ProgramSettings)
+
+    def __post_init__(self) -> None:
+        if self.ranking not in RANKINGS:
+            raise PlanningError(f"unknown ranking {self.ranking!r}; use one of {RANKINGS}")
+
+
+RANKINGS = ("task", "epsilon")
 
 
 @dataclass
@@ -337,14 +344,11 @@ class FunctionalPlanner:
 
     def _order_key(self, cand: CandidateResult) -> tuple[float, int]:
         """Validation order within a batch: best quality first, then proposal rank."""
-        if self.settings.ranking == "epsilon":
-            return (-cand.quality, cand.rank)
-        if self.settings.ranking == "task":
-            return (-cand.task_quality, cand.rank)
-        raise PlanningError(f"unknown ranking {self.settings.ranking!r}; use 'task' or 'epsilon'")
+        quality = cand.task_quality if self.settings.ranking == "task" else cand.quality
+        return (-quality, cand.rank)
 
     def _solve(self, program, obj, rank, proposal) -> CandidateResult:
-        """Solve one proposal and score its contacts (epsilon quality at the grasp)."""
+        """Solve one proposal and score its contacts (epsilon and task quality at the grasp)."""
         solved = program.solve(
             GraspTargets(
                 proposal.wrist,
@@ -360,8 +364,8 @@ class FunctionalPlanner:
             points, inward = program.contacts(
                 solved.wrist, solved.q, self.settings.contact_distance
             )
-            cand.quality = epsilon_quality(points, inward, obj.points.mean(axis=0))
-            cand.task_quality = task_quality(points, inward, obj.points.mean(axis=0))
+            quality = contact_quality(points, inward, obj.points.mean(axis=0))
+            cand.quality, cand.task_quality = quality.epsilon, quality.task
             cand.times["quality"] = time.perf_counter() - t0
         return cand
 

@@ -10,8 +10,12 @@ largest ball about the origin inside that hull: positive means force closure.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError
+
+AXES = np.concatenate([np.eye(3), -np.eye(3)])  # the validator's test forces
 
 
 def friction_wrenches(
@@ -37,60 +41,43 @@ def friction_wrenches(
     return np.asarray(out)
 
 
-def epsilon_quality(
+@dataclass(frozen=True)
+class ContactQuality:
+    epsilon: float  # largest wrench ball about the origin inside the hull (<0: no closure)
+    task: float  # smallest, over the test directions, largest pure force resisted (<0: none)
+
+
+def contact_quality(
     points: np.ndarray,
     inward_normals: np.ndarray,
     centre: np.ndarray,
     mu: float = 0.6,
     edges: int = 6,
-    length: float | None = None,
-) -> float:
-    """Largest wrench-ball radius inside the hull (negative: the origin is outside by that
-    much, so no force closure). `length` defaults to the contacts' mean distance to `centre`."""
+    directions: np.ndarray = AXES,
+) -> ContactQuality:
+    """Both metrics from one wrench hull (torques divided by the contacts' mean distance to
+    `centre`). Epsilon: the radius of the largest ball about the origin inside the hull. Task:
+    the smallest, over `directions`, of the largest pure force along it (at `centre`, no torque)
+    inside the hull; a pure-force ray ignores the torque scaling, so unlike epsilon it weighs
+    torques only by what these forces demand of them (a far-off centre of mass costs quality).
+    Without force closure both are the (negative) distance of the origin outside the hull."""
     points = np.asarray(points, dtype=float)
     if len(points) < 2:
-        return -1.0
-    if length is None:
-        length = max(float(np.mean(np.linalg.norm(points - centre, axis=1))), 1e-3)
+        return ContactQuality(-1.0, -1.0)
+    length = max(float(np.mean(np.linalg.norm(points - centre, axis=1))), 1e-3)
     wrenches = friction_wrenches(points, np.asarray(inward_normals), centre, mu, edges, length)
     try:
         hull = ConvexHull(wrenches)
     except QhullError:  # flat wrench set (e.g. collinear contacts): no force closure
-        return -1.0
+        return ContactQuality(-1.0, -1.0)
     # hull.equations: normal . x + offset <= 0 inside; distance of the origin to each facet
-    return float(np.min(-hull.equations[:, -1]))
-
-
-AXES = np.concatenate([np.eye(3), -np.eye(3)])
-
-
-def task_quality(
-    points: np.ndarray,
-    inward_normals: np.ndarray,
-    centre: np.ndarray,
-    directions: np.ndarray = AXES,
-    mu: float = 0.6,
-    edges: int = 6,
-) -> float:
-    """The smallest, over `directions`, of the largest pure force along it (at `centre`, no
-    torque) inside the contact wrench hull of unit-force cone edges. Unlike epsilon it weighs
-    torques only by what these forces demand of them (a far-off centre of mass costs quality),
-    and does not depend on a characteristic length. <= 0: some direction cannot be resisted."""
-    points = np.asarray(points, dtype=float)
-    if len(points) < 2:
-        return -1.0
-    wrenches = friction_wrenches(points, np.asarray(inward_normals), centre, mu, edges, 1.0)
-    try:
-        hull = ConvexHull(wrenches)
-    except QhullError:
-        return -1.0
     normals, offsets = hull.equations[:, :-1], hull.equations[:, -1]
-    if np.any(offsets > 0):  # the origin lies outside: no force closure at all
-        return -float(np.max(offsets))
+    epsilon = float(np.min(-offsets))
+    if epsilon <= 0:
+        return ContactQuality(epsilon, epsilon)
     reach = []
     for d in np.asarray(directions, dtype=float):
-        w = np.concatenate([d / np.linalg.norm(d), np.zeros(3)])
-        along = normals @ w
+        along = normals[:, :3] @ (d / np.linalg.norm(d))
         ahead = along > 1e-12
         reach.append(float(np.min(-offsets[ahead] / along[ahead])) if ahead.any() else np.inf)
-    return float(min(reach))
+    return ContactQuality(epsilon, float(min(reach)))

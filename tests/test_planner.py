@@ -193,11 +193,11 @@ def test_demo_lists_every_hand(tmp_path):
 
 
 def test_task_quality_needs_closure_and_falls_with_a_far_centre_of_mass():
-    from planner.quality import task_quality
+    from planner.quality import contact_quality
 
     points = np.array([[0.02, 0, 0], [-0.02, 0, 0], [0, 0.02, 0], [0, -0.02, 0]])
     inward = -points / 0.02
-    centred = task_quality(points, inward, np.zeros(3))
+    centred = contact_quality(points, inward, np.zeros(3)).task
     assert centred > 0
-    assert task_quality(points[:2], inward[:2], np.zeros(3)) < 0  # a pinch: no closure
-    assert 0 < task_quality(points, inward, np.array([0, 0, 0.05])) < centred
+    assert contact_quality(points[:2], inward[:2], np.zeros(3)).task < 0  # a pinch: no closure
+    assert 0 < contact_quality(points, inward, np.array([0, 0, 0.05])).task < centred
