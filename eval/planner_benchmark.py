@@ -22,6 +22,7 @@ from tqdm import tqdm
 
 from models.hands import available_hands
 from models.objects import HELDOUT, categories, instructions, make_object, seeds
+from planner.commands.validate import parse_overrides
 from planner.functional import FunctionalPlanner, PlannerSettings
 
 
@@ -60,13 +61,11 @@ _PLANNERS: dict[str, FunctionalPlanner] = {}
 def planner_settings(max_candidates: int, overrides: Sequence[str] = ()) -> PlannerSettings:
     """PlannerSettings with `field=value` overrides; `program.field=value` sets ProgramSettings."""
     settings = PlannerSettings(max_candidates=max_candidates)
-    for item in overrides:
-        key, sep, text = item.partition("=")
-        target = settings.program if key.startswith("program.") else settings
+    for key, value in parse_overrides(list(overrides)).items():
         name = key.removeprefix("program.")
-        if not sep or name not in target.__dataclass_fields__:
-            raise SystemExit(f"--set {item!r}: expected FIELD=VALUE with a PlannerSettings field")
-        value = type(getattr(target, name))(text if text not in ("False", "false") else "")
+        target = settings.program if key.startswith("program.") else settings
+        if name not in target.__dataclass_fields__:
+            raise SystemExit(f"--set {key}: expected FIELD=VALUE with a PlannerSettings field")
         if target is settings:
             settings = replace(settings, **{name: value})
         else:

@@ -309,7 +309,7 @@ def dataset_card(root: str | Path, info: dict[str, Any], meta: dict[str, Any]) -
         valid = gen["valid"].get(key, 0)
         lines.append(
             f"| {key} | {jobs} | {gen['errors'].get(key, 0)} | {gen['holds'].get(key, 0)} | "
-            f"{valid} ({100 * valid / max(jobs, 1):.0f}%) | {gen.get('grasps', {}).get(key, 0)} | "
+            f"{valid} ({100 * valid / max(jobs, 1):.0f}%) | {gen['grasps'].get(key, 0)} | "
             f"{gen['kept'].get(key, 0)} |"
         )
     lines.append("")

@@ -73,8 +73,9 @@ def _record_code(work: Path) -> list[str]:
     """Every code version that has worked in `work` (a resumed run may span several)."""
     path = work / "code.json"
     versions = json.loads(path.read_text()) if path.is_file() else []
-    if code_version() not in versions:
-        versions.append(code_version())
+    current = code_version()
+    if current not in versions:
+        versions.append(current)
         path.write_text(json.dumps(versions) + "\n")
     return versions
 

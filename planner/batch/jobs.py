@@ -11,7 +11,7 @@ from __future__ import annotations
 import json
 import re
 from collections.abc import Iterable, Sequence
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -176,6 +176,15 @@ def make_jobs(
         for hand in hands:
             for instr in instructions(name):
                 for k in range(variants):
-                    job = Job(ref, instr.text, hand, k, max_candidates, protocol)
-                    jobs.append(replace(job, validate_all=validate_all))
+                    jobs.append(
+                        Job(
+                            ref,
+                            instr.text,
+                            hand,
+                            k,
+                            max_candidates,
+                            protocol,
+                            validate_all=validate_all,
+                        )
+                    )
     return jobs

@@ -51,18 +51,19 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def _overrides(items: list[str]) -> dict[str, Any]:
+def parse_overrides(items: list[str]) -> dict[str, Any]:
+    """`--set KEY=VALUE` items as a dict; values are JSON where they parse (60, 0.5, false,
+    [1, 2] as a tuple), True/False as booleans, else strings."""
     out: dict[str, Any] = {}
     for item in items:
-        key, sep, value = item.partition("=")
+        key, sep, text = item.partition("=")
         if not sep:
             raise DrograspError(f"--set expects KEY=VALUE, got {item!r}")
         try:
-            out[key.strip()] = json.loads(value)
+            value = json.loads(text)
         except json.JSONDecodeError:
-            out[key.strip()] = value
-        if isinstance(out[key.strip()], list):
-            out[key.strip()] = tuple(out[key.strip()])
+            value = {"True": True, "False": False}.get(text, text)
+        out[key.strip()] = tuple(value) if isinstance(value, list) else value
     return out
 
 
@@ -101,7 +102,7 @@ def _summary(rows: dict[str, np.ndarray], results: list, wall: float, preset: st
 
 
 def run(args: argparse.Namespace) -> int:
-    protocol = get_protocol(args.preset, **_overrides(args.set))
+    protocol = get_protocol(args.preset, **parse_overrides(args.set))
     rows = read_rows(args.file, args.limit)
     adapter, xml_joints, joint_map = _hand(args)
     n = len(rows["grasp_qpos"])
