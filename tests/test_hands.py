@@ -203,6 +203,16 @@ def test_user_hand_missing_metadata_names_fields(tmp_path):
         load_hand(folder)
 
 
+def test_user_hand_program_hulls_need_links_with_several_boxes(tmp_path):
+    folder = tmp_path / "hulls"
+    shutil.copytree(load_hand("allegro").folder, folder)
+    meta = json.loads((folder / "hand.json").read_text())
+    for link in ("ff_distal", "no_such_link"):  # one box; not a link
+        (folder / "hand.json").write_text(json.dumps({**meta, "program_hull_links": [link]}))
+        with pytest.raises(HandError, match=f"program_hull_links names '{link}' with"):
+            load_hand(folder)
+
+
 def test_cli_hands_json():
     out = subprocess.run(
         [sys.executable, "-m", "planner.cli", "hands", "--json"],

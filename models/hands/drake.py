@@ -22,9 +22,7 @@ from pydrake.math import RigidTransform
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import CoulombFriction
 
-from models.errors import HandError
-
-_CORNERS = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=float)
+from models.hands.primitives import primitive_mesh
 
 
 class DrakeHand:
@@ -70,14 +68,8 @@ class DrakeHand:
 
 def _box_corners(hand, link: str) -> np.ndarray:
     """Corners (N, 3) of the link's collision boxes in the link frame."""
-    boxes = [g for g in hand.tree.geoms.get(link, []) if g.kind == "box"]
-    if len(boxes) < 2:
-        raise HandError(
-            f"hand {hand.name}: program_hull_links names {link!r}, which has {len(boxes)} "
-            "collision boxes; list only links with several boxes"
-        )
-    corners = [(_CORNERS * np.asarray(g.size)) @ g.pose[:3, :3].T + g.pose[:3, 3] for g in boxes]
-    return np.concatenate(corners)
+    boxes = [g for g in hand.tree.geoms[link] if g.kind == "box"]
+    return np.concatenate([primitive_mesh(g).vertices for g in boxes])
 
 
 def _urdf_without_boxes(hand, links: tuple[str, ...]) -> str:

@@ -50,6 +50,13 @@ class HandModel:
         for a, b in self.meta.ignore_collision_pairs:
             if a not in links or b not in links:
                 raise HandError(f"{self.folder}: ignore_collision_pairs names unknown link {a}/{b}")
+        for link in self.meta.program_hull_links:
+            boxes = sum(g.kind == "box" for g in self.tree.geoms.get(link, []))
+            if boxes < 2:
+                raise HandError(
+                    f"{self.folder}: program_hull_links names {link!r} with {boxes} collision "
+                    "boxes; list only links that have several boxes"
+                )
         self._kin = Kinematics(self.tree, list(self.meta.joint_order))
 
     # ---- facts --------------------------------------------------------------------------
