@@ -141,6 +141,18 @@ def print_table(rows: list[dict]) -> None:
         )
 
 
+def print_by_part(records: list[PairRecord]) -> None:
+    """Returned-grasp success per (category, part) and hand: where the planner fails."""
+    hands = sorted({r.hand for r in records})
+    print(f"{'category/part':<24}" + "".join(f"{h:>10}" for h in hands))
+    for cat, part in sorted({(r.category, r.part) for r in records}):
+        cells = []
+        for hand in hands:
+            rs = [r for r in records if (r.category, r.part, r.hand) == (cat, part, hand)]
+            cells.append(f"{sum(r.returned_holds for r in rs)}/{len(rs)}".rjust(10))
+        print(f"{cat + '/' + part:<24}" + "".join(cells))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--split", default="test")
@@ -156,6 +168,9 @@ def main() -> None:
         default=[],
         metavar="FIELD=VALUE",
         help="planner setting overrides, e.g. solve_batch=2 program.major_iterations=60",
+    )
+    parser.add_argument(
+        "--by-part", action="store_true", help="also print returned success per category/part"
     )
     args = parser.parse_args()
     planner_settings(args.candidates, args.set)  # fail early on a bad override
@@ -175,6 +190,8 @@ def main() -> None:
         + (f", settings {' '.join(args.set)}" if args.set else "")
     )
     print_table(summarize(records))
+    if args.by_part:
+        print_by_part(records)
 
 
 if __name__ == "__main__":

@@ -175,6 +175,8 @@ def test_protocol_presets_and_overrides():
         get_protocol("paper", timestep=0)
     with pytest.raises(ProtocolError, match="unknown jacobian"):
         get_protocol("paper", jacobian="banded")
+    with pytest.raises(ProtocolError, match="gravity must be a bool"):
+        get_protocol("paper", gravity="maybe")  # e.g. --set gravity=maybe
 
 
 def test_object_inputs_are_normalized():

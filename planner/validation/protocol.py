@@ -75,6 +75,19 @@ class Protocol:
     rest_speed: float = 0.002  # m/s of the object (and rad/s of fingers x 0.1 m)
 
     def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):  # an override of the wrong kind fails here, loudly
+            default, value = f.default, getattr(self, f.name)
+            if isinstance(default, bool):
+                ok = isinstance(value, bool)
+            elif isinstance(default, int | float):
+                ok = isinstance(value, int | float) and not isinstance(value, bool)
+            else:
+                ok = isinstance(value, type(default))
+            if not ok:
+                raise ProtocolError(
+                    f"protocol {f.name} must be a {type(default).__name__} like {default!r}, "
+                    f"got {value!r}"
+                )
         positive = ("timestep", "impratio", "object_mass", "hold_time", "check_interval")
         for name in positive:
             if not getattr(self, name) > 0:
