@@ -1,10 +1,14 @@
-"""The functional grasp dataset: compact per-split arrays, a torch Dataset, and its counts.
+"""The functional grasp dataset: compact arrays in blocks, a torch Dataset, and its counts.
 
-A dataset folder holds `meta.json` (name tables and format) and one `<split>.npz` per split
-(no pickle). Objects are not stored: each row names a library (category, seed), and
-`models.objects.make_object` regenerates it. Joint arrays are padded to the largest hand's DoF
-with a mask, so hands of different DoF share one array. Written by
-`planner.batch.dataset.compact` (`drograsp dataset compact|generate`).
+A dataset folder holds `meta.json` (format, name tables, the list of blocks) and one
+`blocks/<name>.npz` per block (no pickle). A block is what one generation step added (a range
+of object seeds), so a dataset grows block by block across sessions and machines, and a git
+commit of a grown dataset adds only the new block's file. Rows carry their split; a split is the
+concatenation of its rows over all blocks, in block order. Name tables only ever grow (new names
+are appended), so the indices of earlier blocks stay valid. Objects are not stored: each row
+names a library (category, seed), and `models.objects.make_object` regenerates it. Joint arrays
+are padded to the largest hand's DoF with a mask, so hands of different DoF share one array.
+Written by `planner.batch.dataset` (`drograsp dataset compact|generate`).
 """
 
 from __future__ import annotations
@@ -21,7 +25,7 @@ from torch.utils.data import Dataset
 
 from models.errors import DrograspError
 
-FORMAT = "drograsp-grasps/1"
+FORMAT = "drograsp-grasps/2"
 SPLIT_NAMES: tuple[str, ...] = ("train", "val", "test", "heldout")
 SOURCES: tuple[str, ...] = ("plan", "transfer")
 METRICS: tuple[str, ...] = (
@@ -34,6 +38,7 @@ METRICS: tuple[str, ...] = (
 )
 # name -> (dtype, trailing shape or None for per-row scalars; "dof" = padded joint count)
 ARRAYS: dict[str, tuple[str, tuple]] = {
+    "split": ("int8", ()),  # index into SPLIT_NAMES
     "hand": ("int16", ()),
     "category": ("int16", ()),
     "seed": ("int32", ()),
@@ -86,12 +91,12 @@ def read_meta(root: str | Path) -> dict[str, Any]:
     return meta
 
 
-def load_split(root: str | Path, split: str) -> GraspArrays:
-    """The arrays of one split (an empty split has zero rows)."""
-    meta = read_meta(root)
-    if split not in SPLIT_NAMES:
-        raise DatasetError(f"unknown split {split!r}; choose one of {SPLIT_NAMES}")
-    path = Path(root) / f"{split}.npz"
+def block_path(root: str | Path, name: str) -> Path:
+    return Path(root) / "blocks" / f"{name}.npz"
+
+
+def _read_block(root: str | Path, name: str, dof: int) -> dict[str, np.ndarray]:
+    path = block_path(root, name)
     if not path.is_file():
         raise DatasetError(f"{path} missing: the dataset folder is incomplete")
     with np.load(path, allow_pickle=False) as npz:
@@ -100,10 +105,43 @@ def load_split(root: str | Path, split: str) -> GraspArrays:
     if missing:
         raise DatasetError(f"{path} lacks arrays {sorted(missing)}")
     n = len(arrays["hand"])
-    for name, arr in arrays.items():
+    for key, arr in arrays.items():
         if len(arr) != n:
-            raise DatasetError(f"{path}: {name} has {len(arr)} rows, hand has {n}")
+            raise DatasetError(f"{path}: {key} has {len(arr)} rows, hand has {n}")
+        if ARRAYS.get(key, (None, ()))[1][:1] == ("dof",) and arr.shape[1] < dof:
+            arrays[key] = np.pad(arr, ((0, 0), (0, dof - arr.shape[1])))  # a block of smaller hands
+    return arrays
+
+
+def padded_dof(meta: dict[str, Any]) -> int:
+    """The joint arrays' width: the largest DoF among the dataset's hands."""
+    return max(meta.get("hand_dof", {}).values(), default=1)
+
+
+def load_split(root: str | Path, split: str) -> GraspArrays:
+    """The arrays of one split over all blocks (an empty split has zero rows)."""
+    meta = read_meta(root)
+    if split not in SPLIT_NAMES:
+        raise DatasetError(f"unknown split {split!r}; choose one of {SPLIT_NAMES}")
+    dof = padded_dof(meta)
+    parts = []
+    for name in meta["blocks"]:
+        block = _read_block(root, name, dof)
+        keep = block["split"] == SPLIT_NAMES.index(split)
+        parts.append({k: v[keep] for k, v in block.items()})
+    if not parts:
+        return GraspArrays(split, empty_arrays(dof), meta)
+    arrays = {k: np.concatenate([p[k] for p in parts]) for k in ARRAYS}
     return GraspArrays(split, arrays, meta)
+
+
+def empty_arrays(dof: int, n: int = 0) -> dict[str, np.ndarray]:
+    """Zeroed arrays of ARRAYS for n rows, joints padded to `dof`."""
+    out = {}
+    for name, (dtype, shape) in ARRAYS.items():
+        shape = tuple(dof if s == "dof" else s for s in shape)
+        out[name] = np.zeros((n, *shape), dtype=dtype)
+    return out
 
 
 class GraspDataset(Dataset):

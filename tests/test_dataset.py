@@ -135,6 +135,7 @@ def test_generate_a_tiny_real_dataset(tmp_path):
     ds = GraspDataset(tmp_path / "ds", "train")
     assert ds[0]["metrics"][2] < 0.05  # held within 5 cm
     meta = json.loads((tmp_path / "ds" / "meta.json").read_text())
+    assert list(meta["blocks"]) == ["seeds-00000"]
     assert meta["code"] and meta["code"][0] in (tmp_path / "ds" / "card.md").read_text()
 
 
@@ -156,3 +157,43 @@ def test_every_holding_grasp_of_a_validate_all_job_is_kept(tmp_path):
     assert stats.valid["plan:allegro"] == 1
     none_held = {**with_all, "holding": []}
     assert collect([none_held])[0] == []
+
+
+def test_blocks_grow_a_dataset_like_one_compaction(tmp_path):
+    """Two seed blocks appended one by one give the same splits as compacting both at once;
+    the first block's file is untouched by the second (a git commit adds only the new file)."""
+    from learned.dataset import block_path
+    from planner.batch.dataset import add_block
+
+    settings = {"variants": 2}
+    dirs = []
+    for start in (0, 2):
+        jobs = make_jobs(
+            hands=["allegro", "shadow"],
+            splits=["train", "val", "test", "heldout"],
+            category_names=["mug", "teapot"],
+            objects_per_category=2,
+            start_seed=start,
+            variants=2,
+        )
+        run_batch(jobs, tmp_path / f"b{start}", job_fn=fake_grasp_solve, progress=False)
+        dirs.append(tmp_path / f"b{start}")
+    grown = tmp_path / "grown"
+    first = add_block(grown, "seeds-0", [dirs[0]], settings=settings, seeds=(0, 2), planned=(0, 4))
+    assert "2 of 4 seeds are done" in (grown / "card.md").read_text()
+    before = block_path(grown, "seeds-0").read_bytes()
+    info = add_block(grown, "seeds-2", [dirs[1]], settings=settings, seeds=(2, 4), planned=(0, 4))
+    assert block_path(grown, "seeds-0").read_bytes() == before
+    assert info["total"] > first["total"] > 0
+    assert "4 of 4 seeds are done" in (grown / "card.md").read_text()
+    whole = compact(dirs, tmp_path / "whole")
+    assert info["splits"] == whole["splits"] and info["hands"] == whole["hands"]
+    assert info["generator"] == whole["generator"]
+    for split in ("train", "val", "test", "heldout"):
+        a, b = load_split(grown, split), load_split(tmp_path / "whole", split)
+        assert a.names("instructions") == b.names("instructions")
+        np.testing.assert_array_equal(a.arrays["q_grasp"], b.arrays["q_grasp"])
+    with pytest.raises(DatasetError, match="already holds block seeds-2"):
+        add_block(grown, "seeds-2", [dirs[1]], settings=settings, seeds=(2, 4))
+    with pytest.raises(DatasetError, match="other settings"):
+        add_block(grown, "seeds-4", [dirs[1]], settings={"variants": 3}, seeds=(4, 6))

@@ -3,7 +3,9 @@
 Keeps the grasps that hold in validation and touch the instructed part, drops duplicates
 (same object, instruction and hand, wrist within 1 mm and 1 degree, joints within 0.01 rad),
 splits by object instance (models.objects.split_of), and writes the card from the written
-arrays, so the card always matches what the loader reads.
+arrays, so the card always matches what the loader reads. `compact` writes a dataset afresh
+(one block); `add_block` appends one block to a growing dataset (dataset generation adds one
+per range of seeds, so a generation spread over sessions keeps every finished block).
 """
 
 from __future__ import annotations
@@ -19,13 +21,16 @@ from typing import Any
 import numpy as np
 
 from learned.dataset import (
-    ARRAYS,
     FORMAT,
     METRICS,
     SOURCES,
     SPLIT_NAMES,
+    DatasetError,
+    block_path,
     dataset_info,
+    empty_arrays,
     load_split,
+    read_meta,
 )
 from models.hands import load_hand
 from models.objects import INTENTS, categories, category, parse_instruction, split_of
@@ -65,6 +70,19 @@ class GeneratorStats:
             "transfers_valid": rows(self.transfers_valid),
             "skipped_objects": self.skipped_objects,
         }
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> GeneratorStats:
+        counters = {k: Counter(v) for k, v in data.items() if k != "skipped_objects"}
+        return cls(**counters, skipped_objects=int(data.get("skipped_objects", 0)))
+
+    def __add__(self, other: GeneratorStats) -> GeneratorStats:
+        sums = {
+            name: getattr(self, name) + getattr(other, name)
+            for name in self.__dataclass_fields__
+            if name != "skipped_objects"
+        }
+        return GeneratorStats(**sums, skipped_objects=self.skipped_objects + other.skipped_objects)
 
 
 def _rotation_deg(a: np.ndarray, b: np.ndarray) -> float:
@@ -158,28 +176,29 @@ def collect(records: Iterable[dict[str, Any]]) -> tuple[list[dict[str, Any]], Ge
     return rows, stats
 
 
-def _tables(rows: list[dict[str, Any]]) -> dict[str, list[str]]:
-    hands = sorted({r["hand"] for r in rows})
-    parts = sorted({r["part"] for r in rows})
-    texts = sorted({r["instruction"] for r in rows})
-    return {
-        "hands": hands,
-        "categories": list(categories()),
-        "instructions": texts,
-        "intents": list(INTENTS),
-        "parts": parts,
-        "sources": list(SOURCES),
-    }
+FIXED_TABLES = {
+    "categories": list(categories()),
+    "intents": list(INTENTS),
+    "sources": list(SOURCES),
+}
+
+
+def _tables(rows: list[dict[str, Any]], old: dict[str, Any] | None) -> dict[str, list[str]]:
+    """Name tables for `rows`: the old tables with any new names appended (indices of earlier
+    blocks stay valid)."""
+    tables: dict[str, list[str]] = {}
+    for key, column in (("hands", "hand"), ("instructions", "instruction"), ("parts", "part")):
+        names = list((old or {}).get(key, []))
+        names += sorted({r[column] for r in rows} - set(names))
+        tables[key] = names
+    return tables | FIXED_TABLES
 
 
 def _arrays(rows: list[dict[str, Any]], tables: dict[str, list[str]], dof: int) -> dict:
-    n = len(rows)
-    out = {}
-    for name, (dtype, shape) in ARRAYS.items():
-        shape = tuple(dof if s == "dof" else s for s in shape)
-        out[name] = np.zeros((n, *shape), dtype=dtype)
+    out = empty_arrays(dof, len(rows))
     index = {key: {v: i for i, v in enumerate(vals)} for key, vals in tables.items()}
     for i, r in enumerate(rows):
+        out["split"][i] = SPLIT_NAMES.index(split_of(r["category"], r["seed"]))
         out["hand"][i] = index["hands"][r["hand"]]
         out["category"][i] = index["categories"][r["category"]]
         out["seed"][i] = r["seed"]
@@ -198,40 +217,99 @@ def _arrays(rows: list[dict[str, Any]], tables: dict[str, list[str]], dof: int) 
     return out
 
 
+def _write(
+    out: Path,
+    name: str,
+    rows: list[dict[str, Any]],
+    stats: GeneratorStats,
+    old: dict[str, Any] | None,
+    extra: dict[str, Any],
+) -> dict[str, Any]:
+    """Write block `name` from `rows`, then meta.json (the block listed: it is the commit point)
+    and the card. Returns `dataset_info(out)`."""
+    tables = _tables(rows, old)
+    hand_dof = {h: load_hand(h).dof for h in tables["hands"]}
+    out.mkdir(parents=True, exist_ok=True)
+    path = block_path(out, name)
+    path.parent.mkdir(exist_ok=True)
+    tmp = path.with_name(f".{name}.{os.getpid()}.tmp.npz")
+    np.savez_compressed(tmp, **_arrays(rows, tables, max(hand_dof.values(), default=1)))
+    os.replace(tmp, path)
+    blocks = dict((old or {}).get("blocks", {}))
+    blocks[name] = {"grasps": len(rows), "generator": stats.to_dict()} | extra.pop("block", {})
+    total = GeneratorStats()
+    for block in blocks.values():
+        total = total + GeneratorStats.from_dict(block["generator"])
+    meta = {
+        "format": FORMAT,
+        **tables,
+        "hand_dof": hand_dof,
+        "metrics": list(METRICS),
+        "blocks": blocks,
+        "generator": total.to_dict(),
+        **extra,
+    }
+    write_atomic(out / "meta.json", json.dumps(meta, indent=1) + "\n")
+    info = dataset_info(out)
+    write_atomic(out / "card.md", dataset_card(out, info, meta))
+    return info
+
+
 def compact(
     result_dirs: Sequence[str | Path],
     out: str | Path,
     command: str | None = None,
     code: Sequence[str] = (),
 ) -> dict[str, Any]:
-    """Write the dataset folder `out` from batch output folders (planned, then transfers):
-    meta.json, <split>.npz for every split, card.md. Returns `dataset_info(out)`."""
-    records = (r for d in result_dirs for r in read_results(d))
-    rows, stats = collect(records)
-    tables = _tables(rows)
-    dof = max((load_hand(h).dof for h in tables["hands"]), default=1)
+    """Write the dataset folder `out` afresh (one block, "all") from batch output folders
+    (planned, then transfers): meta.json, blocks/all.npz, card.md. Returns `dataset_info(out)`."""
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    by_split: dict[str, list[dict[str, Any]]] = {s: [] for s in SPLIT_NAMES}
-    for row in rows:
-        by_split[split_of(row["category"], row["seed"])].append(row)
-    for split, split_rows in by_split.items():
-        tmp = out / f".{split}.{os.getpid()}.tmp.npz"
-        np.savez_compressed(tmp, **_arrays(split_rows, tables, dof))
-        os.replace(tmp, out / f"{split}.npz")
-    meta = {
-        "format": FORMAT,
-        **tables,
-        "hand_dof": {h: load_hand(h).dof for h in tables["hands"]},
-        "metrics": list(METRICS),
-        "generator": stats.to_dict(),
-        "command": command,
-        "code": list(code),
+    rows, stats = collect(r for d in result_dirs for r in read_results(d))
+    for stale in (out / "blocks").glob("*.npz"):
+        stale.unlink()
+    return _write(out, "all", rows, stats, None, {"command": command, "code": list(code)})
+
+
+def dataset_blocks(out: str | Path) -> dict[str, Any]:
+    """The blocks a dataset folder holds (empty when there is no dataset yet)."""
+    return read_meta(out)["blocks"] if (Path(out) / "meta.json").is_file() else {}
+
+
+def add_block(
+    out: str | Path,
+    name: str,
+    result_dirs: Sequence[str | Path],
+    *,
+    settings: dict[str, Any],
+    seeds: tuple[int, int],
+    planned: tuple[int, int] | None = None,
+    command: str | None = None,
+    code: Sequence[str] = (),
+) -> dict[str, Any]:
+    """Append block `name` (results of seeds [start, end)) to the dataset in `out`, made with
+    `settings` (what generated it; every block of a dataset must share them); `planned` is the
+    seed range the generation aims at (the card reports progress against it)."""
+    out = Path(out)
+    old = read_meta(out) if (out / "meta.json").is_file() else None
+    if old is not None:
+        if old.get("settings") != settings:
+            raise DatasetError(
+                f"{out} was generated with other settings ({old.get('settings')}); give a new "
+                "output folder or the same options"
+            )
+        if name in old["blocks"]:
+            raise DatasetError(f"{out} already holds block {name}")
+    rows, stats = collect(r for d in result_dirs for r in read_results(d))
+    codes = list((old or {}).get("code", []))
+    codes += [c for c in code if c not in codes]
+    extra = {
+        "settings": settings,
+        "planned_seeds": list(planned or seeds),
+        "command": command or (old or {}).get("command"),
+        "code": codes,
+        "block": {"seeds": list(seeds)},
     }
-    write_atomic(out / "meta.json", json.dumps(meta, indent=1) + "\n")
-    info = dataset_info(out)
-    write_atomic(out / "card.md", dataset_card(out, info, meta))
-    return info
+    return _write(out, name, rows, stats, old, extra)
 
 
 def diversity(root: str | Path) -> dict[str, float]:
@@ -268,6 +346,21 @@ def _table(title: str, counts: dict[str, int]) -> list[str]:
     lines = [f"| {title} | grasps |", "|---|---:|"]
     lines += [f"| {k} | {v} |" for k, v in counts.items()]
     return lines + [""]
+
+
+def _blocks_line(meta: dict[str, Any]) -> str:
+    blocks = meta["blocks"]
+    sizes = ", ".join(f"{name} ({b['grasps']})" for name, b in blocks.items())
+    line = f"{len(blocks)} block(s), grasps kept in each: {sizes}."
+    if "planned_seeds" in meta:
+        first, end = meta["planned_seeds"]
+        held = {seed for b in blocks.values() for seed in range(*b["seeds"])}
+        done = len(held & set(range(first, end)))
+        line += (
+            f" Seeds {first}..{end - 1} of every category are planned; {done} of "
+            f"{end - first} seeds are done."
+        )
+    return line
 
 
 def dataset_card(root: str | Path, info: dict[str, Any], meta: dict[str, Any]) -> str:
@@ -328,11 +421,18 @@ def dataset_card(root: str | Path, info: dict[str, Any], meta: dict[str, Any]) -
         f"{div['wrist_distance_cm']:.1f} cm, wrist rotation {div['wrist_rotation_deg']:.1f} deg, "
         f"joint RMS difference {div['joint_rms_rad']:.3f} rad.",
         "",
+        "## Blocks",
+        "",
+        _blocks_line(meta),
+        "",
         "## Regenerate",
         "",
         "```bash",
         meta.get("command") or "(not recorded)",
         "```",
+        "",
+        "The command resumes: it skips the blocks the folder holds and the finished shards of an "
+        "interrupted block (kept under its work folder).",
         "",
         "Generated by code version(s): " + (", ".join(meta.get("code") or []) or "not recorded"),
         "",

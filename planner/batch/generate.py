@@ -1,7 +1,10 @@
-"""Dataset generation end to end: jobs -> planned batch -> transfer batch -> compact + card.
+"""Dataset generation end to end: jobs -> planned batch -> transfer batch -> block + card.
 
-Every stage is resumable (re-run the same command after a kill) and deterministic: the
-intermediate jobs files and result shards live in a work folder beside the dataset.
+Generation runs block by block over object seeds (`block_seeds` seeds of every category each):
+a finished block is appended to the dataset folder at once, so a generation that needs more
+machine time than one session keeps every finished block (commit the folder; the same command
+resumes in the next session). Within a block every stage is resumable (re-run after a kill) and
+deterministic: the block's jobs files and result shards live in a work folder.
 """
 
 from __future__ import annotations
@@ -13,8 +16,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from learned.dataset import dataset_info
 from models.hands import available_hands
-from planner.batch.dataset import compact
+from planner.batch.dataset import add_block, dataset_blocks
 from planner.batch.jobs import make_jobs, read_jobs, write_jobs
 from planner.batch.runner import read_results, run_batch
 
@@ -38,7 +42,29 @@ class GenerateSettings:
     ray: bool = False
     ray_address: str | None = None
     shard_size: int = 16
+    block_seeds: int = 1  # seeds per block: the unit of work kept across sessions
     progress: bool = True
+
+    def dataset_settings(self) -> dict[str, Any]:
+        """What decides a block's content: every block of one dataset must share it (the seed
+        range may grow, so a dataset can be extended with more seeds later)."""
+        keys = (
+            "hands", "splits", "category_names", "variants", "max_candidates", "protocol",
+            "validate_all", "transfer", "transfer_per_pair", "block_seeds",
+        )  # fmt: skip
+        out = {k: getattr(self, k) for k in keys}
+        return {k: list(v) if isinstance(v, list | tuple) else v for k, v in out.items()}
+
+    def blocks(self) -> list[tuple[int, int]]:
+        """Seed ranges [start, end) of the blocks, in order."""
+        end = self.start_seed + self.objects_per_category
+        step = max(self.block_seeds, 1)
+        return [(a, min(a + step, end)) for a in range(self.start_seed, end, step)]
+
+
+def block_name(seeds: tuple[int, int]) -> str:
+    a, b = seeds
+    return f"seeds-{a:05d}" + (f"-{b - 1:05d}" if b - 1 > a else "")
 
 
 CODE_DIRS = ("models", "learned", "planner", "eval")
@@ -86,21 +112,37 @@ def generate_dataset(
     work: str | Path | None = None,
     command: str | None = None,
 ) -> dict[str, Any]:
-    """Generate (or resume generating) the dataset in `out`; return its `dataset_info`."""
+    """Generate (or resume generating) the dataset in `out`, block by block; return its
+    `dataset_info`. Blocks the folder already holds are skipped."""
     s = settings
+    if s.block_seeds < 1:
+        raise ValueError("block_seeds must be at least 1")
     out = Path(out)
     work = Path(work) if work is not None else out / "work"
     work.mkdir(parents=True, exist_ok=True)
     if work.resolve().parent == out.resolve():
         (out / ".gitignore").write_text(f"{work.name}/\n")  # shards are not part of the dataset
+    done = dataset_blocks(out)
+    todo = [b for b in s.blocks() if block_name(b) not in done]
+    for i, seeds in enumerate(todo):
+        if s.progress:
+            print(f"block {block_name(seeds)} ({i + 1} of {len(todo)} to do)", flush=True)
+        _generate_block(out, work / block_name(seeds), s, seeds, command)
+    return dataset_info(out)
+
+
+def _generate_block(
+    out: Path, work: Path, s: GenerateSettings, seeds: tuple[int, int], command: str | None
+) -> None:
+    work.mkdir(parents=True, exist_ok=True)
     code = _record_code(work)
     jobs_file = work / "jobs.jsonl"
     jobs = make_jobs(
         hands=s.hands,
         splits=s.splits,
         category_names=s.category_names,
-        objects_per_category=s.objects_per_category,
-        start_seed=s.start_seed,
+        objects_per_category=seeds[1] - seeds[0],
+        start_seed=seeds[0],
         variants=s.variants,
         max_candidates=s.max_candidates,
         protocol=s.protocol,
@@ -123,4 +165,13 @@ def generate_dataset(
         write_jobs(transfers, work / "transfer_jobs.jsonl")
         run_batch(transfers, work / "transfer", **run)
         dirs.append(work / "transfer")
-    return compact(dirs, out, command, code)
+    add_block(
+        out,
+        block_name(seeds),
+        dirs,
+        settings=s.dataset_settings(),
+        seeds=seeds,
+        planned=(s.start_seed, s.start_seed + s.objects_per_category),
+        command=command,
+        code=code,
+    )

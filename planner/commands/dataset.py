@@ -40,6 +40,14 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="N",
         help="source grasps per object, instruction and hand that seed other hands (default 1)",
     )
+    g.add_argument(
+        "--block-seeds",
+        type=int,
+        default=1,
+        metavar="N",
+        help="seeds per block (default 1): each finished block is added to OUT_DIR at once, so "
+        "an interrupted generation keeps it; the same command resumes",
+    )
     add_backend_arguments(g)
     g.set_defaults(func=run_generate)
 
@@ -73,6 +81,7 @@ def run_generate(args: argparse.Namespace) -> int:
         validate_all=not args.first_only,
         transfer=not args.no_transfer,
         transfer_per_pair=args.transfer_per_pair,
+        block_seeds=args.block_seeds,
         workers=args.workers,
         ray=args.ray,
         ray_address=args.ray_address,
