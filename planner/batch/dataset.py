@@ -307,7 +307,7 @@ def add_block(
         "planned_seeds": list(planned or seeds),
         "command": command or (old or {}).get("command"),
         "code": codes,
-        "block": {"seeds": list(seeds)},
+        "block": {"seeds": list(seeds), "code": list(code)},
     }
     return _write(out, name, rows, stats, old, extra)
 
@@ -316,8 +316,18 @@ def diversity(root: str | Path) -> dict[str, float]:
     """Spread of grasps within each (object, instruction, hand) group: grasps per group and
     mean pairwise wrist distance, wrist rotation and joint distance (groups of 2 or more)."""
     sizes, moves, turns, joints = [], [], [], []
+    distinct = 0
     for split in SPLIT_NAMES:
         a = load_split(root, split).arrays
+        pose = np.concatenate(  # the same hand pose on the same object, whatever instruction
+            [
+                np.stack([a["hand"], a["category"], a["seed"]], axis=1),
+                np.round(a["wrist"] * 1000),
+                np.round(a["q_grasp"] * 100),
+            ],
+            axis=1,
+        )
+        distinct += len(np.unique(pose, axis=0))
         keys = np.stack([a["hand"], a["category"], a["seed"], a["instruction"]], axis=1)
         _, group = np.unique(keys, axis=0, return_inverse=True)
         for g in np.unique(group):
@@ -334,6 +344,7 @@ def diversity(root: str | Path) -> dict[str, float]:
         return float(np.mean(values)) if values else float("nan")
 
     return {
+        "distinct_poses": distinct,
         "groups": len(sizes),
         "grasps_per_group": mean(sizes),
         "wrist_distance_cm": 100 * mean(moves),
@@ -420,6 +431,12 @@ def dataset_card(root: str | Path, info: dict[str, Any], meta: dict[str, Any]) -
         f"{div['grasps_per_group']:.2f} grasps per group): mean pairwise wrist distance "
         f"{div['wrist_distance_cm']:.1f} cm, wrist rotation {div['wrist_rotation_deg']:.1f} deg, "
         f"joint RMS difference {div['joint_rms_rad']:.3f} rad.",
+        "",
+        f"Distinct hand poses: {div['distinct_poses']} of {info['total']} grasps (wrist to 1 mm, "
+        "joints to 0.01 rad, per object and hand). Instructions that name the same part of an "
+        'object ("Hold a mug by body", "Liftup a mug by body") get the same planned grasps, '
+        "as the planner places anchors by part, not by intent; such a grasp appears once per "
+        "instruction.",
         "",
         "## Blocks",
         "",

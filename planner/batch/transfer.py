@@ -137,8 +137,9 @@ def transfer_grasp(
 def transfer_jobs(
     records: Iterable[dict[str, Any]], hands: Sequence[str], per_pair: int | None = None
 ) -> list[Job]:
-    """Transfer jobs: every valid planned grasp (at most `per_pair` per object, instruction and
-    source hand, lowest variants first) seeds each other hand in `hands`."""
+    """Transfer jobs: every valid planned grasp (every holding grasp of a validate_all job, at
+    most `per_pair` per object, instruction and source hand, lowest variants first) seeds each
+    other hand in `hands`."""
     taken: dict[tuple[str, str, str], int] = {}
     jobs = []
     for record in records:
@@ -146,13 +147,16 @@ def transfer_jobs(
         if not record.get("valid") or "source" in job or record.get("grasp") is None:
             continue
         key = (json.dumps(job["object"], sort_keys=True), job["instruction"], job["hand"])
-        if per_pair is not None and taken.get(key, 0) >= per_pair:
-            continue
-        taken[key] = taken.get(key, 0) + 1
-        source = {"id": record["id"], "hand": job["hand"], "grasp": record["grasp"]}
-        for hand in hands:
-            if hand != job["hand"]:
-                jobs.append(
-                    Job(job["object"], job["instruction"], hand, 0, 1, job["protocol"], source)
-                )
+        grasps = [h["grasp"] for h in record.get("holding") or []] or [record["grasp"]]
+        for k, grasp in enumerate(grasps):  # the returned grasp comes first
+            if per_pair is not None and taken.get(key, 0) >= per_pair:
+                break
+            taken[key] = taken.get(key, 0) + 1
+            source_id = record["id"] if k == 0 else f"{record['id']}/h{k}"
+            source = {"id": source_id, "hand": job["hand"], "grasp": grasp}
+            for hand in hands:
+                if hand != job["hand"]:
+                    jobs.append(
+                        Job(job["object"], job["instruction"], hand, 0, 1, job["protocol"], source)
+                    )
     return jobs

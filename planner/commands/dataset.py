@@ -38,7 +38,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         type=int,
         default=1,
         metavar="N",
-        help="source grasps per object, instruction and hand that seed other hands (default 1)",
+        help="source grasps per object, instruction and hand that seed other hands (default 1; "
+        "0: every valid grasp)",
     )
     g.add_argument(
         "--block-seeds",
@@ -80,7 +81,7 @@ def run_generate(args: argparse.Namespace) -> int:
         protocol=args.preset,
         validate_all=not args.first_only,
         transfer=not args.no_transfer,
-        transfer_per_pair=args.transfer_per_pair,
+        transfer_per_pair=args.transfer_per_pair or None,
         block_seeds=args.block_seeds,
         workers=args.workers,
         ray=args.ray,
