@@ -220,6 +220,22 @@ def test_real_planner_and_transfer_jobs(tmp_path):
         assert Grasp.from_dict(moved["grasp"]).hand == "shadow"
 
 
+def test_transfer_sources_are_every_holding_grasp_up_to_per_pair():
+    from planner.batch.transfer import transfer_jobs
+    from tests.batch_fakes import fake_grasp_solve
+
+    job = Job({"category": "mug", "seed": 0}, "Hold a mug by body", "allegro", validate_all=True)
+    record = fake_grasp_solve(job)
+    others = [fake_grasp_solve(Job(job.object, job.instruction, "allegro", v)) for v in (1, 4)]
+    holding = [{"grasp": g["grasp"]} for g in [record, *others]]
+    record = {**record, "id": job.id, "job": job.to_dict(), "valid": True, "holding": holding}
+    every = transfer_jobs([record], ["allegro", "leap", "shadow"])
+    assert len(every) == 3 * 2 and len({j.id for j in every}) == 6
+    assert [j.source["grasp"] for j in every[::2]] == [h["grasp"] for h in holding]
+    assert every[0].source["id"] == job.id and every[2].source["id"] == f"{job.id}/h1"
+    assert len(transfer_jobs([record], ["allegro", "shadow"], per_pair=2)) == 2
+
+
 def test_hand_size_is_read_from_geometry():
     from models.hands import load_hand
     from planner.batch.transfer import hand_size, scale_between

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -197,3 +198,35 @@ def test_blocks_grow_a_dataset_like_one_compaction(tmp_path):
         add_block(grown, "seeds-2", [dirs[1]], settings=settings, seeds=(2, 4))
     with pytest.raises(DatasetError, match="other settings"):
         add_block(grown, "seeds-4", [dirs[1]], settings={"variants": 3}, seeds=(4, 6))
+
+
+SHIPPED = Path(__file__).resolve().parents[1] / "data" / "grasps_v1"
+
+
+@pytest.mark.skipif(not (SHIPPED / "meta.json").is_file(), reason="no dataset in data/grasps_v1")
+def test_shipped_dataset_loads_and_matches_its_card():
+    """The committed dataset: every row valid (held, on the instructed part, in its object's
+    split), the loader's counts equal `dataset info`, and the card is what the data says."""
+    from models.objects import parse_instruction
+    from planner.batch.dataset import dataset_card
+
+    info = dataset_info(SHIPPED)
+    meta = json.loads((SHIPPED / "meta.json").read_text())
+    assert (SHIPPED / "card.md").read_text() == dataset_card(SHIPPED, info, meta)
+    assert sum(b["grasps"] for b in meta["blocks"].values()) == info["total"] > 0
+    for split, n in info["splits"].items():
+        data = load_split(SHIPPED, split)
+        assert len(GraspDataset(SHIPPED, split)) == n == len(data)
+        a = data.arrays
+        for cat, seed in {
+            (c, int(s))
+            for c, s in zip(data.names("categories", "category"), a["seed"], strict=True)
+        }:
+            assert split_of(cat, seed) == split
+        texts, parts = data.names("instructions"), data.names("parts", "part")
+        assert all(parse_instruction(t).part == p for t, p in zip(texts, parts, strict=True))
+        translation, rotation = a["metrics"][:, 2], a["metrics"][:, 3]
+        assert (translation < 0.05).all() and (rotation < 15).all()
+        for hand in set(data.names("hands", "hand")):
+            rows = np.array(data.names("hands", "hand")) == hand
+            assert (a["dof_mask"][rows].sum(axis=1) == load_hand(hand).dof).all()
