@@ -10,7 +10,9 @@ from pathlib import Path
 
 from planner.commands.jobs import add_backend_arguments, add_job_arguments
 
-DEFAULT_ROOT = Path(__file__).resolve().parents[2] / "data" / "grasps_v1"
+# Dataset v1 lives in the source checkout (objects regenerate from seeds; the installed package
+# does not carry it): the default is relative to the current folder, the checkout's root.
+DEFAULT_ROOT = Path("data") / "grasps_v1"
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -58,7 +60,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     c.set_defaults(func=run_compact)
 
     i = dsub.add_parser("info", help="counts per split, hand, category and intent")
-    i.add_argument("root", nargs="?", default=str(DEFAULT_ROOT), metavar="DIR")
+    i.add_argument(
+        "root",
+        nargs="?",
+        default=str(DEFAULT_ROOT),
+        metavar="DIR",
+        help=f"dataset folder (default {DEFAULT_ROOT}, dataset v1 when run from the checkout)",
+    )
     i.add_argument("--json", action="store_true")
     i.set_defaults(func=run_info)
 
