@@ -19,7 +19,7 @@ from typing import Any
 from learned.dataset import dataset_info
 from models.hands import available_hands
 from planner.batch.dataset import add_block, dataset_blocks
-from planner.batch.jobs import make_jobs, read_jobs, write_jobs
+from planner.batch.jobs import JobError, make_jobs, read_jobs, write_jobs
 from planner.batch.runner import read_results, run_batch
 
 
@@ -116,7 +116,7 @@ def generate_dataset(
     `dataset_info`. Blocks the folder already holds are skipped."""
     s = settings
     if s.block_seeds < 1:
-        raise ValueError("block_seeds must be at least 1")
+        raise JobError(f"block seeds must be at least 1, got {s.block_seeds}")
     out = Path(out)
     work = Path(work) if work is not None else out / "work"
     work.mkdir(parents=True, exist_ok=True)
