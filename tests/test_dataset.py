@@ -255,3 +255,20 @@ def test_shipped_dataset_meets_the_v1_counts_once_complete():
     for split in info["splits"]:
         texts |= set(load_split(SHIPPED, split).names("instructions"))
     assert texts == {i.text for c in categories() for i in instructions(c)}
+
+
+def test_topup_jobs_add_variants_only_where_nothing_was_found():
+    from planner.batch.generate import topup_jobs
+
+    jobs = make_jobs(hands=["allegro"], category_names=["mug"], objects_per_category=1, variants=2)
+    valid_text = jobs[0].instruction  # its first variant finds a grasp, the others find none
+    records = [
+        {"id": j.id, "job": j.to_dict(), "valid": j.instruction == valid_text and j.variant == 0}
+        for j in jobs
+    ]
+    extra = topup_jobs(records, variants=2, extra=2)
+    texts = {j.instruction for j in jobs} - {valid_text}
+    assert {j.instruction for j in extra} == texts and len(extra) == 2 * len(texts)
+    assert {j.variant for j in extra} == {2, 3}
+    assert not {j.id for j in extra} & {j.id for j in jobs}
+    assert topup_jobs(records, variants=2, extra=0) == []

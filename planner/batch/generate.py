@@ -11,15 +11,15 @@ from __future__ import annotations
 
 import json
 import subprocess
-from collections.abc import Sequence
-from dataclasses import dataclass, field
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 from learned.dataset import dataset_info
 from models.hands import available_hands
 from planner.batch.dataset import add_block, dataset_blocks
-from planner.batch.jobs import JobError, make_jobs, read_jobs, write_jobs
+from planner.batch.jobs import Job, JobError, make_jobs, read_jobs, write_jobs
 from planner.batch.runner import read_results, run_batch
 
 
@@ -43,6 +43,7 @@ class GenerateSettings:
     ray_address: str | None = None
     shard_size: int = 16
     block_seeds: int = 1  # seeds per block: the unit of work kept across sessions
+    extra_variants: int = 0  # more variants for pairs whose `variants` jobs found nothing
     progress: bool = True
 
     def dataset_settings(self) -> dict[str, Any]:
@@ -50,7 +51,7 @@ class GenerateSettings:
         range may grow, so a dataset can be extended with more seeds later)."""
         keys = (
             "hands", "splits", "category_names", "variants", "max_candidates", "protocol",
-            "validate_all", "transfer", "transfer_per_pair", "block_seeds",
+            "validate_all", "transfer", "transfer_per_pair", "block_seeds", "extra_variants",
         )  # fmt: skip
         out = {k: getattr(self, k) for k in keys}
         return {k: list(v) if isinstance(v, list | tuple) else v for k, v in out.items()}
@@ -60,6 +61,26 @@ class GenerateSettings:
         end = self.start_seed + self.objects_per_category
         step = max(self.block_seeds, 1)
         return [(a, min(a + step, end)) for a in range(self.start_seed, end, step)]
+
+
+def topup_jobs(records: Iterable[dict[str, Any]], variants: int, extra: int) -> list[Job]:
+    """More variants for every (object, instruction, hand) whose `variants` planned jobs found
+    no valid grasp: hard parts (a bottle's neck, a bowl's rim) hold only at lower-ranked
+    proposals, which the first windows do not reach. Variants `variants` .. `variants+extra-1`,
+    in the order the pairs first appear."""
+    found: dict[tuple[str, str, str], bool] = {}
+    first: dict[tuple[str, str, str], Job] = {}
+    for record in records:
+        job = Job.from_dict(record["job"])
+        key = (json.dumps(job.object, sort_keys=True), job.instruction, job.hand)
+        first.setdefault(key, job)
+        found[key] = found.get(key, False) or bool(record.get("valid"))
+    return [
+        replace(job, variant=variants + k, id="")
+        for key, job in first.items()
+        if not found[key]
+        for k in range(extra)
+    ]
 
 
 def block_name(seeds: tuple[int, int]) -> str:
@@ -158,10 +179,16 @@ def _generate_block(
     )
     run_batch(read_jobs(jobs_file), work / "plan", **run)
     dirs = [work / "plan"]
+    if s.extra_variants > 0:
+        extra = topup_jobs(read_results(work / "plan"), s.variants, s.extra_variants)
+        write_jobs(extra, work / "topup_jobs.jsonl")
+        run_batch(extra, work / "topup", **run)
+        dirs.append(work / "topup")
     if s.transfer and len(s.hands) > 1:
         from planner.batch.transfer import transfer_jobs
 
-        transfers = transfer_jobs(read_results(work / "plan"), list(s.hands), s.transfer_per_pair)
+        planned = (r for d in dirs for r in read_results(d))
+        transfers = transfer_jobs(planned, list(s.hands), s.transfer_per_pair)
         write_jobs(transfers, work / "transfer_jobs.jsonl")
         run_batch(transfers, work / "transfer", **run)
         dirs.append(work / "transfer")

@@ -51,6 +51,14 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="seeds per block (default 1): each finished block is added to OUT_DIR at once, so "
         "an interrupted generation keeps it; the same command resumes",
     )
+    g.add_argument(
+        "--extra-variants",
+        type=int,
+        default=0,
+        metavar="N",
+        help="N more variants for each object, instruction and hand whose variants found no "
+        "valid grasp (default 0)",
+    )
     add_backend_arguments(g)
     g.set_defaults(func=run_generate)
 
@@ -91,6 +99,7 @@ def run_generate(args: argparse.Namespace) -> int:
         transfer=not args.no_transfer,
         transfer_per_pair=args.transfer_per_pair or None,
         block_seeds=args.block_seeds,
+        extra_variants=args.extra_variants,
         workers=args.workers,
         ray=args.ray,
         ray_address=args.ray_address,
