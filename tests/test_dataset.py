@@ -196,8 +196,19 @@ def test_blocks_grow_a_dataset_like_one_compaction(tmp_path):
         np.testing.assert_array_equal(a.arrays["q_grasp"], b.arrays["q_grasp"])
     with pytest.raises(DatasetError, match="already holds block seeds-2"):
         add_block(grown, "seeds-2", [dirs[1]], settings=settings, seeds=(2, 4))
-    with pytest.raises(DatasetError, match="other settings"):
+    with pytest.raises(DatasetError, match="other settings .differing: variants"):
         add_block(grown, "seeds-4", [dirs[1]], settings={"variants": 3}, seeds=(4, 6))
+
+
+def test_generate_refuses_other_settings_before_any_work(tmp_path, monkeypatch):
+    from planner.batch import generate
+    from planner.batch.dataset import add_block
+
+    settings = generate.GenerateSettings(hands=["allegro"], category_names=["mug"], progress=False)
+    add_block(tmp_path, "seeds-00000", [], settings=settings.dataset_settings(), seeds=(0, 1))
+    monkeypatch.setattr(generate, "run_batch", lambda *a, **k: pytest.fail("ran jobs"))
+    with pytest.raises(DatasetError, match="differing: variants"):
+        generate.generate_dataset(tmp_path, replace(settings, variants=5))
 
 
 SHIPPED = Path(__file__).resolve().parents[1] / "data" / "grasps_v1"

@@ -275,6 +275,21 @@ def dataset_blocks(out: str | Path) -> dict[str, Any]:
     return read_meta(out)["blocks"] if (Path(out) / "meta.json").is_file() else {}
 
 
+def check_settings(out: str | Path, settings: dict[str, Any]) -> None:
+    """Refuse to grow a dataset with blocks made another way (checked before any work)."""
+    if not (Path(out) / "meta.json").is_file():
+        return
+    old = read_meta(out).get("settings")
+    if old != settings:
+        changed = sorted(
+            k for k in set(old or {}) | set(settings) if (old or {}).get(k) != settings.get(k)
+        )
+        raise DatasetError(
+            f"{out} was generated with other settings (differing: {', '.join(changed)}); give a "
+            "new output folder or the options it was made with (its card shows the command)"
+        )
+
+
 def add_block(
     out: str | Path,
     name: str,
@@ -290,15 +305,10 @@ def add_block(
     `settings` (what generated it; every block of a dataset must share them); `planned` is the
     seed range the generation aims at (the card reports progress against it)."""
     out = Path(out)
+    check_settings(out, settings)
     old = read_meta(out) if (out / "meta.json").is_file() else None
-    if old is not None:
-        if old.get("settings") != settings:
-            raise DatasetError(
-                f"{out} was generated with other settings ({old.get('settings')}); give a new "
-                "output folder or the same options"
-            )
-        if name in old["blocks"]:
-            raise DatasetError(f"{out} already holds block {name}")
+    if old is not None and name in old["blocks"]:
+        raise DatasetError(f"{out} already holds block {name}")
     rows, stats = collect(r for d in result_dirs for r in read_results(d))
     codes = list((old or {}).get("code", []))
     codes += [c for c in code if c not in codes]

@@ -18,7 +18,7 @@ from typing import Any
 
 from learned.dataset import dataset_info
 from models.hands import available_hands
-from planner.batch.dataset import add_block, dataset_blocks
+from planner.batch.dataset import add_block, check_settings, dataset_blocks
 from planner.batch.jobs import Job, JobError, make_jobs, read_jobs, write_jobs
 from planner.batch.runner import read_results, run_batch
 
@@ -143,6 +143,7 @@ def generate_dataset(
     work.mkdir(parents=True, exist_ok=True)
     if work.resolve().parent == out.resolve():
         (out / ".gitignore").write_text(f"{work.name}/\n")  # shards are not part of the dataset
+    check_settings(out, s.dataset_settings())  # before hours of work, not after
     done = dataset_blocks(out)
     todo = [b for b in s.blocks() if block_name(b) not in done]
     for i, seeds in enumerate(todo):
