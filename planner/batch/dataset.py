@@ -224,9 +224,10 @@ def _write(
     stats: GeneratorStats,
     old: dict[str, Any] | None,
     extra: dict[str, Any],
+    block: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
-    """Write block `name` from `rows`, then meta.json (the block listed: it is the commit point)
-    and the card. Returns `dataset_info(out)`."""
+    """Write block `name` from `rows` (`block`: more facts for its meta entry), then meta.json
+    (the block listed: it is the commit point) and the card. Returns `dataset_info(out)`."""
     tables = _tables(rows, old)
     hand_dof = {h: load_hand(h).dof for h in tables["hands"]}
     out.mkdir(parents=True, exist_ok=True)
@@ -236,7 +237,7 @@ def _write(
     np.savez_compressed(tmp, **_arrays(rows, tables, max(hand_dof.values(), default=1)))
     os.replace(tmp, path)
     blocks = dict((old or {}).get("blocks", {}))
-    blocks[name] = {"grasps": len(rows), "generator": stats.to_dict()} | extra.pop("block", {})
+    blocks[name] = {"grasps": len(rows), "generator": stats.to_dict()} | (block or {})
     total = GeneratorStats()
     for block in blocks.values():
         total = total + GeneratorStats.from_dict(block["generator"])
@@ -317,9 +318,9 @@ def add_block(
         "planned_seeds": list(planned or seeds),
         "command": command or (old or {}).get("command"),
         "code": codes,
-        "block": {"seeds": list(seeds), "code": list(code)},
     }
-    return _write(out, name, rows, stats, old, extra)
+    block = {"seeds": list(seeds), "code": list(code)}
+    return _write(out, name, rows, stats, old, extra, block)
 
 
 def diversity(root: str | Path) -> dict[str, float]:
