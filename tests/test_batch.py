@@ -15,7 +15,7 @@ import pytest
 
 from planner import cli
 from planner.batch import Job, JobError, make_jobs, read_jobs, read_results, run_batch, write_jobs
-from planner.batch.runner import shard_path
+from planner.batch.runner import job_key, shard_path
 from tests.batch_fakes import fake_jobs, fake_solve
 
 REPO = Path(__file__).resolve().parents[1]
@@ -87,6 +87,22 @@ def test_results_do_not_depend_on_worker_count(tmp_path):
     run_batch(jobs, tmp_path / "two", workers=2, shard_size=3, job_fn=fake_solve, progress=False)
     assert comparable(tmp_path / "one") == comparable(tmp_path / "two")
     assert len(list((tmp_path / "two" / "shards").glob("shard-*.jsonl"))) == 4
+
+
+def test_reused_records_are_not_run_again_but_errors_are(tmp_path):
+    jobs = fake_jobs(8, {5: "Use a mug by raise"})
+    run_batch(jobs, tmp_path / "first", shard_size=3, job_fn=fake_solve, progress=False)
+    earlier = {job_key(r["job"]): r for r in read_results(tmp_path / "first")}
+    assert job_key(jobs[0]) in earlier
+    del earlier[job_key(jobs[1])]
+    summary = run_batch(
+        jobs, tmp_path / "again", shard_size=3, job_fn=fake_solve, progress=False, reuse=earlier
+    )
+    assert summary.ran == 2 and summary.skipped == 6  # job 1 (not given) and job 5 (an error)
+    first, again = list(read_results(tmp_path / "first")), list(read_results(tmp_path / "again"))
+    taken = [i for i in range(8) if again[i] == first[i]]  # timings too: the very record
+    assert taken == [0, 2, 3, 4, 6, 7]
+    assert comparable(tmp_path / "again") == comparable(tmp_path / "first")
 
 
 def test_worker_crash_is_recorded_and_the_rest_complete(tmp_path):

@@ -283,3 +283,77 @@ def test_topup_jobs_add_variants_only_where_nothing_was_found():
     assert {j.variant for j in extra} == {2, 3}
     assert not {j.id for j in extra} & {j.id for j in jobs}
     assert topup_jobs(records, variants=2, extra=0) == []
+
+
+def _solver(calls: list[str], changed: str | None = None):
+    """fake_grasp_solve, recording the categories it is called for; `changed`: that category's
+    grasps come out otherwise (as after a change to its objects)."""
+
+    def solve(job):
+        name = job.object["category"]
+        calls.append(name)
+        record = fake_grasp_solve(job)
+        if name == changed:
+            record["grasp"]["grasp"] = [0.5 * v for v in record["grasp"]["grasp"]]
+        return record
+
+    return solve
+
+
+def test_refresh_makes_one_category_again_and_keeps_the_others(tmp_path, monkeypatch):
+    """After a change to teapots, refresh re-runs only teapot jobs, and the dataset is then what
+    generating it from scratch with the changed code gives; a second refresh runs nothing."""
+    from planner.batch import generate, solve
+    from planner.batch.generate import GenerateSettings, generate_dataset, refresh_dataset
+
+    settings = GenerateSettings(
+        hands=["allegro", "shadow"],
+        category_names=["mug", "teapot"],
+        objects_per_category=2,
+        variants=2,
+        extra_variants=1,
+        progress=False,
+    )
+    calls: list[str] = []
+    monkeypatch.setattr(solve, "solve_job", _solver(calls))
+    generate_dataset(tmp_path / "ds", settings)
+    assert {"mug", "teapot"} <= set(calls)
+    before = {s: load_split(tmp_path / "ds", s).arrays for s in ("train", "heldout")}
+
+    calls.clear()
+    monkeypatch.setattr(solve, "solve_job", _solver(calls, changed="teapot"))
+    info = refresh_dataset(tmp_path / "ds", ["teapot"], progress=False)
+    assert calls and set(calls) == {"teapot"}
+    after = {s: load_split(tmp_path / "ds", s).arrays for s in ("train", "heldout")}
+    np.testing.assert_array_equal(after["train"]["q_grasp"], before["train"]["q_grasp"])  # mugs
+    assert not np.allclose(after["heldout"]["q_grasp"], before["heldout"]["q_grasp"])  # teapots
+    meta = json.loads((tmp_path / "ds" / "meta.json").read_text())
+    version = generate.code_version()
+    for block in meta["blocks"].values():
+        assert block["refreshed"] == [{"categories": ["teapot"], "code": version}]
+    assert (
+        "rows of teapot were made again in 2 block(s)" in (tmp_path / "ds" / "card.md").read_text()
+    )
+
+    calls.clear()
+    assert refresh_dataset(tmp_path / "ds", ["teapot"], progress=False) == info
+    assert calls == []  # every block already refreshed by this code
+
+    scratch = tmp_path / "scratch"
+    generate_dataset(scratch, settings)
+    for split in ("train", "heldout"):
+        a, b = load_split(tmp_path / "ds", split), load_split(scratch, split)
+        for key in a.arrays:
+            np.testing.assert_array_equal(a.arrays[key], b.arrays[key], err_msg=key)
+
+
+def test_refresh_needs_a_generated_dataset(tiny, tmp_path):
+    from planner.batch.generate import refresh_dataset
+
+    root, _, _ = tiny
+    with pytest.raises(DatasetError, match="not made by `drograsp dataset generate`"):
+        refresh_dataset(root / "data", ["mug"])
+    with pytest.raises(DatasetError, match="no dataset"):
+        refresh_dataset(tmp_path, ["mug"])
+    code = cli.main(["dataset", "refresh", str(tmp_path), "--categories", "mug"])
+    assert code == 2

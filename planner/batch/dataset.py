@@ -301,16 +301,24 @@ def add_block(
     planned: tuple[int, int] | None = None,
     command: str | None = None,
     code: Sequence[str] = (),
+    refreshed: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Append block `name` (results of seeds [start, end)) to the dataset in `out`, made with
     `settings` (what generated it; every block of a dataset must share them); `planned` is the
-    seed range the generation aims at (the card reports progress against it)."""
+    seed range the generation aims at (the card reports progress against it). `refreshed`
+    ({"categories", "code"}): replace the block the dataset holds instead, recording that these
+    categories' rows were made again (see planner.batch.generate.refresh_dataset)."""
     out = Path(out)
     check_settings(out, settings)
     old = read_meta(out) if (out / "meta.json").is_file() else None
-    if old is not None and name in old["blocks"]:
+    held = (old or {}).get("blocks", {}).get(name)
+    if held is not None and refreshed is None:
         raise DatasetError(f"{out} already holds block {name}")
+    if held is None and refreshed is not None:
+        raise DatasetError(f"{out} holds no block {name} to refresh")
     rows, stats = collect(r for d in result_dirs for r in read_results(d))
+    if held is not None:  # the earlier code made the rows that were kept
+        code = [*held.get("code", []), *(c for c in code if c not in held.get("code", []))]
     codes = list((old or {}).get("code", []))
     codes += [c for c in code if c not in codes]
     extra = {
@@ -320,6 +328,8 @@ def add_block(
         "code": codes,
     }
     block = {"seeds": list(seeds), "code": list(code)}
+    if refreshed is not None:
+        block["refreshed"] = [*held.get("refreshed", []), refreshed]
     return _write(out, name, rows, stats, old, extra, block)
 
 
@@ -381,6 +391,17 @@ def _blocks_line(meta: dict[str, Any]) -> str:
         line += (
             f" Seeds {first}..{end - 1} of every category are planned; {done} of "
             f"{end - first} seeds are done."
+        )
+    refreshes = Counter(
+        (", ".join(r["categories"]), r["code"])
+        for b in blocks.values()
+        for r in b.get("refreshed", [])
+    )
+    for (names, code), n in refreshes.items():
+        line += (
+            f" The rows of {names} were made again in {n} block(s) by code {code} "
+            f"(`drograsp dataset refresh DIR --categories {names.replace(',', '')}`; the other "
+            "categories' results were kept)."
         )
     return line
 

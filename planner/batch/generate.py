@@ -10,17 +10,19 @@ deterministic: the block's jobs files and result shards live in a work folder.
 from __future__ import annotations
 
 import json
+import shutil
 import subprocess
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from learned.dataset import dataset_info
+from learned.dataset import DatasetError, dataset_info, read_meta
 from models.hands import available_hands
+from models.objects import category
 from planner.batch.dataset import add_block, check_settings, dataset_blocks
 from planner.batch.jobs import Job, JobError, make_jobs, read_jobs, write_jobs
-from planner.batch.runner import read_results, run_batch
+from planner.batch.runner import job_key, read_results, run_batch
 
 
 @dataclass
@@ -153,9 +155,101 @@ def generate_dataset(
     return dataset_info(out)
 
 
+STAGES = ("plan", "topup", "transfer")  # a block's result folders under its work folder
+
+
+def refresh_dataset(
+    out: str | Path,
+    category_names: Sequence[str],
+    *,
+    work: str | Path | None = None,
+    workers: int = 1,
+    ray: bool = False,
+    ray_address: str | None = None,
+    progress: bool = True,
+) -> dict[str, Any]:
+    """Make the rows of `category_names` again in every block of `out` with this code (after a
+    change to those categories' objects or planning), keeping every other category's results.
+
+    Each block is generated again from the settings in meta.json, into a fresh work folder; the
+    jobs of other categories are taken from the block's earlier work folder where it is still
+    there (they would come out the same), else run again too. So a refreshed dataset is what the
+    generation command gives from scratch with this code. A block is replaced only once its new
+    version is complete, and blocks already refreshed this way are skipped: re-running resumes.
+    Returns `dataset_info(out)`."""
+    out = Path(out)
+    if not (out / "meta.json").is_file():
+        raise DatasetError(f"{out} holds no dataset (no meta.json) to refresh")
+    names = sorted({category(c).name for c in category_names})
+    if not names:
+        raise DatasetError("give at least one category to refresh (--categories NAME ...)")
+    meta = read_meta(out)
+    if "settings" not in meta or any("seeds" not in b for b in meta["blocks"].values()):
+        raise DatasetError(
+            f"{out} was not made by `drograsp dataset generate` (no generation settings or seed "
+            "blocks), so its blocks cannot be made again; run the generation afresh instead"
+        )
+    work = Path(work) if work is not None else out / "work"
+    first, end = meta.get("planned_seeds") or (0, 0)
+    s = GenerateSettings(
+        **meta["settings"],
+        objects_per_category=end - first,
+        start_seed=first,
+        workers=workers,
+        ray=ray,
+        ray_address=ray_address,
+        progress=progress,
+    )
+    current = code_version()
+    todo = [
+        (name, block)
+        for name, block in meta["blocks"].items()
+        if {"categories": names, "code": current} not in block.get("refreshed", [])
+    ]
+    for i, (name, block) in enumerate(todo):
+        if progress:
+            print(
+                f"refresh {', '.join(names)} in block {name} ({i + 1} of {len(todo)})", flush=True
+            )
+        earlier = work / name
+        reuse = (
+            {
+                job_key(r["job"]): r
+                for stage in STAGES
+                for r in read_results(earlier / stage)
+                if category(r["job"]["object"].get("category", "")).name not in names
+            }
+            if earlier.is_dir()
+            else {}
+        )
+        fresh = work / f"{name}.refresh"
+        refreshed = {"categories": names, "code": current}
+        _generate_block(
+            out,
+            fresh,
+            s,
+            tuple(block["seeds"]),
+            meta.get("command"),
+            reuse=reuse,
+            refreshed=refreshed,
+        )
+        if earlier.is_dir():
+            shutil.rmtree(earlier)
+        fresh.rename(earlier)
+    return dataset_info(out)
+
+
 def _generate_block(
-    out: Path, work: Path, s: GenerateSettings, seeds: tuple[int, int], command: str | None
+    out: Path,
+    work: Path,
+    s: GenerateSettings,
+    seeds: tuple[int, int],
+    command: str | None,
+    reuse: Mapping[str, dict[str, Any]] | None = None,
+    refreshed: dict[str, Any] | None = None,
 ) -> None:
+    """Plan, top up, transfer and add the block of `seeds` (`refreshed`: replace the block the
+    dataset holds, recording this refresh; `reuse`: records of earlier runs, see run_batch)."""
     work.mkdir(parents=True, exist_ok=True)
     code = _record_code(work)
     jobs_file = work / "jobs.jsonl"
@@ -177,6 +271,7 @@ def _generate_block(
         ray_address=s.ray_address,
         shard_size=s.shard_size,
         progress=s.progress,
+        reuse=reuse,
     )
     run_batch(read_jobs(jobs_file), work / "plan", **run)
     dirs = [work / "plan"]
@@ -202,4 +297,5 @@ def _generate_block(
         planned=(s.start_seed, s.start_seed + s.objects_per_category),
         command=command,
         code=code,
+        refreshed=refreshed,
     )

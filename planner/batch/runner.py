@@ -13,10 +13,11 @@ re-running the same command runs exactly the jobs of the missing shards.
 from __future__ import annotations
 
 import hashlib
+import itertools
 import json
 import os
 import time
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -33,7 +34,7 @@ class BatchSummary:
     """Counts over the whole jobs list (finished shards of earlier runs included)."""
 
     jobs: int
-    skipped: int  # finished in an earlier run
+    skipped: int  # finished in an earlier run (or reused from one)
     ran: int
     errors: int
     success: int  # the returned grasp holds in validation
@@ -58,6 +59,12 @@ def jobs_digest(jobs: Sequence[Job]) -> str:
         h.update(json.dumps(job.to_dict(), sort_keys=True).encode())
         h.update(b"\n")
     return h.hexdigest()
+
+
+def job_key(job: Job | dict[str, Any]) -> str:
+    """What identifies a job's work (its full description, id included), for `reuse`."""
+    data = job.to_dict() if isinstance(job, Job) else job
+    return json.dumps(data, sort_keys=True)
 
 
 def shard_path(out_dir: Path, shard: int) -> Path:
@@ -124,12 +131,15 @@ def run_batch(
     shard_size: int = SHARD_SIZE,
     job_fn: JobFn | None = None,
     progress: bool = True,
+    reuse: Mapping[str, dict[str, Any]] | None = None,
 ) -> BatchSummary:
     """Solve every job not yet in a finished shard of `out_dir`; return the batch's counts.
 
     `job_fn(job) -> dict` replaces the planner (default `planner.batch.solve.solve_job`); it
     must be a module-level function so that workers can import it. `ray` starts a local Ray
-    instance with `workers` CPUs; `ray_address` joins a running cluster instead."""
+    instance with `workers` CPUs; `ray_address` joins a running cluster instead. `reuse` maps
+    `job_key(job)` to a record made earlier for that very job (another folder's run of the same
+    code): such a job is not run again and its record is written as it is."""
     if job_fn is None:
         from planner.batch.solve import solve_job
 
@@ -141,25 +151,30 @@ def run_batch(
     _check_folder(out, jobs, shard_size)
     done = _finished_shards(out, jobs, shard_size)
     todo = [(i, j) for i, j in enumerate(jobs) if i // shard_size not in done]
+    reused = [(i, (reuse or {}).get(job_key(j))) for i, j in todo]
+    reused = [(i, r) for i, r in reused if r is not None and r.get("error") is None]
+    taken = {i for i, _ in reused}
+    to_run = [(i, j) for i, j in todo if i not in taken]
     backend = "ray" if (ray or ray_address) else ("pool" if workers > 1 else "serial")
     start = time.perf_counter()
     ran_valid = 0
     bar = _progress(len(jobs), len(jobs) - len(todo), progress)
     try:
         stream: Iterator[tuple[int, dict]]
-        if not todo:
+        if not to_run:
             stream = iter(())
         elif backend == "ray":
-            stream = run_ray(job_fn, todo, workers, ray_address)
+            stream = run_ray(job_fn, to_run, workers, ray_address)
         elif backend == "pool":
-            stream = run_pool(job_fn, todo, min(workers, max(len(todo), 1)))
+            stream = run_pool(job_fn, to_run, min(workers, max(len(to_run), 1)))
         else:
-            stream = run_serial(job_fn, todo)
+            stream = run_serial(job_fn, to_run)
+        stream = itertools.chain(iter(reused), stream)
         buffers: dict[int, dict[int, dict]] = {}
         for index, record in stream:
             shard = index // shard_size
             buffers.setdefault(shard, {})[index] = record
-            ran_valid += bool(record.get("valid"))
+            ran_valid += index not in taken and bool(record.get("valid"))
             expected = min(shard_size, len(jobs) - shard * shard_size)
             if len(buffers[shard]) == expected:
                 records = buffers.pop(shard)
@@ -171,7 +186,8 @@ def run_batch(
     finally:
         if bar is not None:
             bar.close()
-    summary = _summarize(out, len(jobs), len(jobs) - len(todo), len(todo), backend, workers)
+    ran = len(to_run)
+    summary = _summarize(out, len(jobs), len(jobs) - ran, ran, backend, workers)
     summary.wall_time = time.perf_counter() - start
     summary.ran_valid = ran_valid
     write_atomic(out / "summary.json", json.dumps(summary.to_dict(), indent=1) + "\n")

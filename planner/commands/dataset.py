@@ -62,6 +62,19 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_backend_arguments(g)
     g.set_defaults(func=run_generate)
 
+    r = dsub.add_parser(
+        "refresh",
+        help="make the rows of some categories again with this code, keeping the others",
+        description="After a change to some categories' objects or planning: every block is "
+        "made again from the generation settings in DIR/meta.json; the other categories' "
+        "results are taken from the blocks' work folders where present. Re-running resumes.",
+    )
+    r.add_argument("root", metavar="DIR")
+    r.add_argument("--categories", nargs="+", required=True, metavar="NAME")
+    r.add_argument("--work", metavar="DIR", help="jobs and result shards (default DIR/work)")
+    add_backend_arguments(r)
+    r.set_defaults(func=run_refresh)
+
     c = dsub.add_parser("compact", help="batch result folders -> dataset folder + card")
     c.add_argument("results", nargs="+", metavar="RESULTS_DIR")
     c.add_argument("--out", required=True, metavar="DIR")
@@ -108,6 +121,23 @@ def run_generate(args: argparse.Namespace) -> int:
     info = generate_dataset(args.out, settings, args.work, _command())
     print_info(info)
     print(f"wrote {args.out} (card: {Path(args.out) / 'card.md'})")
+    return 0
+
+
+def run_refresh(args: argparse.Namespace) -> int:
+    from planner.batch.generate import refresh_dataset
+
+    info = refresh_dataset(
+        args.root,
+        args.categories,
+        work=args.work,
+        workers=args.workers,
+        ray=args.ray,
+        ray_address=args.ray_address,
+        progress=not args.no_progress,
+    )
+    print_info(info)
+    print(f"refreshed {args.root} (card: {Path(args.root) / 'card.md'})")
     return 0
 
 
