@@ -48,10 +48,11 @@ def cup(rng: np.random.Generator) -> Parts:
 
 
 def bottle(rng: np.random.Generator) -> Parts:
-    """Closed bottle 17-25 cm tall: body with shoulder, neck, screw cap."""
-    Rb, Hb = rng.uniform(0.03, 0.04), rng.uniform(0.12, 0.17)
-    hs, rn = rng.uniform(0.025, 0.04), rng.uniform(0.011, 0.015)
-    hn, hc = rng.uniform(0.015, 0.025), rng.uniform(0.015, 0.022)
+    """Closed bottle 19-27 cm tall, beer or wine style: body with shoulder, a neck long enough to
+    wrap the fingers around (4.5-6.5 cm, as fingertips 2 cm apart need), screw cap."""
+    Rb, Hb = rng.uniform(0.03, 0.04), rng.uniform(0.11, 0.15)
+    hs, rn = rng.uniform(0.02, 0.035), rng.uniform(0.011, 0.014)
+    hn, hc = rng.uniform(0.045, 0.065), rng.uniform(0.015, 0.022)
     rc = rn + rng.uniform(0.0015, 0.003)
     body = hull(
         np.vstack(
@@ -65,7 +66,7 @@ def bottle(rng: np.random.Generator) -> Parts:
     )
     top = Hb + hs + hn
     neck = cylinder_z(rn, rn, Hb + hs - 0.002, top)
-    cap = cylinder_z(rc, rc, top - 0.6 * hn, top + hc - 0.6 * hn)
+    cap = cylinder_z(rc, rc, top - 0.006, top + hc - 0.006)
     return {"body": [body], "neck": [neck], "cap": [cap]}
 
 
