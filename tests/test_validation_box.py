@@ -36,3 +36,29 @@ def test_box_grasp_holds_and_fails_when_moved_or_not_squeezed(hand_name):
     assert not validate(grasp.moved([0.05, 0.0, 0.0]), pieces, hand_name, "paper").success
     light = Grasp.from_dict({**grasp.to_dict(), "squeeze": grasp.grasp.tolist()})
     assert not validate(light, pieces, hand_name, "paper").success
+
+
+def test_mujoco_warnings_go_into_the_result_not_to_stderr(monkeypatch, capfd):
+    """An unstable simulation's warning is recorded with the verdict; MuJoCo's own handler (a
+    line on stderr and MUJOCO_LOG.TXT in the working folder) is back in place afterwards."""
+    import mujoco
+
+    from planner.validation import validator
+
+    def unstable(*args):
+        model = mujoco.MjModel.from_xml_string(
+            '<mujoco><worldbody><body><freejoint/><geom size=".01"/></body></worldbody></mujoco>'
+        )
+        data = mujoco.MjData(model)
+        data.xfrc_applied[1, 0] = np.inf
+        mujoco.mj_step(model, data)
+        mujoco.mj_step(model, data)  # the same warning twice is kept once
+        return validator.ValidationResult(success=False, reason="slipped")
+
+    monkeypatch.setattr(validator, "_validate", unstable)
+    result = validator.validate(None, None, None)
+    assert result.warnings == [
+        "Nan, Inf or huge value in QACC at DOF 0. The simulation is unstable."
+    ]
+    assert "QACC" not in capfd.readouterr().err
+    assert mujoco.get_mju_user_warning() is None

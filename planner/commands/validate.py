@@ -86,6 +86,7 @@ def _summary(rows: dict[str, np.ndarray], results: list, wall: float, preset: st
         "success_rate": float(ok.mean()) if len(ok) else 0.0,
         "successes": int(ok.sum()),
         "pregrasp_penetration_failures": sum(r.reason == "pregrasp_penetration" for r in results),
+        "unstable_simulations": sum(any("unstable" in w for w in r.warnings) for r in results),
         "mean_translation_m": float(np.mean([r.translation for r in tested])) if tested else None,
         "mean_rotation_deg": float(np.mean([r.rotation_deg for r in tested])) if tested else None,
         "mean_wall_time_s": float(np.mean([r.wall_time for r in results])) if results else 0.0,
@@ -140,6 +141,11 @@ def run(args: argparse.Namespace) -> int:
             f"{summary['mean_rotation_deg'] or 0:.2f} deg; "
             f"{summary['mean_wall_time_s']:.2f} s per grasp"
         )
+        if summary["unstable_simulations"]:
+            print(
+                f"{summary['unstable_simulations']} simulation(s) went unstable (MuJoCo reset "
+                "them); `--out` lists each grasp's warnings"
+            )
         if "agreement" in summary:
             print(
                 f"agreement with reference_success: {summary['agreement']:.1%} "

@@ -9,6 +9,8 @@ equals DexGraspBench's, which re-simulates the closing per direction.
 from __future__ import annotations
 
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -51,6 +53,11 @@ class ValidationResult:
     object_mass: float = 0.0  # kg, as compiled
     simulated_time: float = 0.0  # s of physics simulated for this grasp
     wall_time: float = 0.0  # s
+    # MuJoCo's warnings during the test, e.g. "Nan, Inf or huge value in QACC ... unstable":
+    # MuJoCo then resets the simulation state and the verdict is what the displacement shows
+    # after it (the object leaves the hand); recorded here instead of printed on stderr and
+    # appended to a MUJOCO_LOG.TXT in the working folder.
+    warnings: list[str] = field(default_factory=list)
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
@@ -231,6 +238,23 @@ def _hold(
 
 
 # ---------------------------------------------------------------------- public API
+@contextmanager
+def _mujoco_warnings(into: list[str]) -> Iterator[None]:
+    """Collect MuJoCo's warnings into `into` (each message once), restoring the handler after."""
+    previous = mujoco.get_mju_user_warning()
+
+    def keep(message: str) -> None:
+        text = message.split(" Time =")[0].strip()
+        if text not in into:
+            into.append(text)
+
+    mujoco.set_mju_user_warning(keep)
+    try:
+        yield
+    finally:
+        mujoco.set_mju_user_warning(previous)
+
+
 def validate(
     grasp: Grasp,
     obj: Any,
@@ -246,6 +270,21 @@ def validate(
     `object_pose` (xyz + wxyz, default identity) places the object; `all_directions` overrides
     the protocol's early stop at the first failing direction.
     """
+    warnings: list[str] = []
+    with _mujoco_warnings(warnings):
+        result = _validate(grasp, obj, hand, protocol, object_pose, all_directions)
+    result.warnings = warnings
+    return result
+
+
+def _validate(
+    grasp: Grasp,
+    obj: Any,
+    hand: Any,
+    protocol: str | Protocol,
+    object_pose: Any,
+    all_directions: bool | None,
+) -> ValidationResult:
     start = time.perf_counter()
     proto = get_protocol(protocol)
     if all_directions is not None:
