@@ -291,6 +291,11 @@ def check_settings(out: str | Path, settings: dict[str, Any]) -> None:
         )
 
 
+def _union(first: Sequence[str], more: Sequence[str]) -> list[str]:
+    """`first`, then the items of `more` it lacks, in order."""
+    return [*first, *(c for c in more if c not in first)]
+
+
 def add_block(
     out: str | Path,
     name: str,
@@ -318,9 +323,8 @@ def add_block(
         raise DatasetError(f"{out} holds no block {name} to refresh")
     rows, stats = collect(r for d in result_dirs for r in read_results(d))
     if held is not None:  # the earlier code made the rows that were kept
-        code = [*held.get("code", []), *(c for c in code if c not in held.get("code", []))]
-    codes = list((old or {}).get("code", []))
-    codes += [c for c in code if c not in codes]
+        code = _union(held.get("code", []), code)
+    codes = _union((old or {}).get("code", []), code)
     extra = {
         "settings": settings,
         "planned_seeds": list(planned or seeds),
@@ -393,14 +397,12 @@ def _blocks_line(meta: dict[str, Any]) -> str:
             f"{end - first} seeds are done."
         )
     refreshes = Counter(
-        (", ".join(r["categories"]), r["code"])
-        for b in blocks.values()
-        for r in b.get("refreshed", [])
+        (tuple(r["categories"]), r["code"]) for b in blocks.values() for r in b.get("refreshed", [])
     )
     for (names, code), n in refreshes.items():
         line += (
-            f" The rows of {names} were made again in {n} block(s) by code {code} "
-            f"(`drograsp dataset refresh DIR --categories {names.replace(',', '')}`; the other "
+            f" The rows of {', '.join(names)} were made again in {n} block(s) by code {code} "
+            f"(`drograsp dataset refresh DIR --categories {' '.join(names)}`; the other "
             "categories' results were kept)."
         )
     return line

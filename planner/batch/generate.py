@@ -200,43 +200,42 @@ def refresh_dataset(
         ray_address=ray_address,
         progress=progress,
     )
-    current = code_version()
+    refreshed = {"categories": names, "code": code_version()}
     todo = [
         (name, block)
         for name, block in meta["blocks"].items()
-        if {"categories": names, "code": current} not in block.get("refreshed", [])
+        if refreshed not in block.get("refreshed", [])
     ]
     for i, (name, block) in enumerate(todo):
         if progress:
             print(
                 f"refresh {', '.join(names)} in block {name} ({i + 1} of {len(todo)})", flush=True
             )
-        earlier = work / name
-        reuse = (
-            {
-                job_key(r["job"]): r
-                for stage in STAGES
-                for r in read_results(earlier / stage)
-                if category(r["job"]["object"].get("category", "")).name not in names
-            }
-            if earlier.is_dir()
-            else {}
-        )
-        fresh = work / f"{name}.refresh"
-        refreshed = {"categories": names, "code": current}
+        earlier, fresh = work / name, work / f"{name}.refresh"
         _generate_block(
             out,
             fresh,
             s,
             tuple(block["seeds"]),
             meta.get("command"),
-            reuse=reuse,
+            reuse=_records_to_keep(earlier, names),
             refreshed=refreshed,
         )
         if earlier.is_dir():
             shutil.rmtree(earlier)
         fresh.rename(earlier)
     return dataset_info(out)
+
+
+def _records_to_keep(work: Path, names: Sequence[str]) -> dict[str, dict[str, Any]]:
+    """The records of a block's earlier work folder (every stage) for objects outside the
+    categories `names`, by job_key (empty when the folder is gone)."""
+    return {
+        job_key(r["job"]): r
+        for stage in STAGES
+        for r in read_results(work / stage)
+        if r["job"]["object"].get("category") not in names
+    }
 
 
 def _generate_block(
@@ -273,21 +272,22 @@ def _generate_block(
         progress=s.progress,
         reuse=reuse,
     )
-    run_batch(read_jobs(jobs_file), work / "plan", **run)
-    dirs = [work / "plan"]
+    plan, topup, transfer = (work / stage for stage in STAGES)
+    run_batch(read_jobs(jobs_file), plan, **run)
+    dirs = [plan]
     if s.extra_variants > 0:
-        extra = topup_jobs(read_results(work / "plan"), s.variants, s.extra_variants)
+        extra = topup_jobs(read_results(plan), s.variants, s.extra_variants)
         write_jobs(extra, work / "topup_jobs.jsonl")
-        run_batch(extra, work / "topup", **run)
-        dirs.append(work / "topup")
+        run_batch(extra, topup, **run)
+        dirs.append(topup)
     if s.transfer and len(s.hands) > 1:
         from planner.batch.transfer import transfer_jobs
 
         planned = (r for d in dirs for r in read_results(d))
         transfers = transfer_jobs(planned, list(s.hands), s.transfer_per_pair)
         write_jobs(transfers, work / "transfer_jobs.jsonl")
-        run_batch(transfers, work / "transfer", **run)
-        dirs.append(work / "transfer")
+        run_batch(transfers, transfer, **run)
+        dirs.append(transfer)
     add_block(
         out,
         block_name(seeds),

@@ -151,8 +151,8 @@ def run_batch(
     _check_folder(out, jobs, shard_size)
     done = _finished_shards(out, jobs, shard_size)
     todo = [(i, j) for i, j in enumerate(jobs) if i // shard_size not in done]
-    reused = [(i, (reuse or {}).get(job_key(j))) for i, j in todo]
-    reused = [(i, r) for i, r in reused if r is not None and r.get("error") is None]
+    earlier = ((i, reuse.get(job_key(j))) for i, j in todo) if reuse else ()
+    reused = [(i, r) for i, r in earlier if r is not None and r.get("error") is None]
     taken = {i for i, _ in reused}
     to_run = [(i, j) for i, j in todo if i not in taken]
     backend = "ray" if (ray or ray_address) else ("pool" if workers > 1 else "serial")
