@@ -8,6 +8,7 @@ equals DexGraspBench's, which re-simulates the closing per direction.
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -199,7 +200,8 @@ def _hold(
     obj_pose: np.ndarray,
     protocol: Protocol,
 ) -> DirectionResult:
-    """Apply the force along `direction` and check the object's displacement periodically."""
+    """Apply the force along `direction`; check the displacement every `check_interval` (the
+    protocol's verdict) and, in between, whether the object has come to rest (early exit)."""
     m = scene.model
     data.xfrc_applied[:] = 0.0
     data.xfrc_applied[scene.object_body, :3] = (
@@ -207,33 +209,57 @@ def _hold(
     )
     q = scene.object_qpos
     dof = int(m.jnt_dofadr[m.body_jntadr[scene.object_body]])
+    per_check, per_rest = protocol.steps_per_check, protocol.steps_per_rest_check
+    chunk = math.gcd(per_check, per_rest)
+    total = protocol.checks * per_check
     translation = rotation = 0.0
     held = True
-    checks_done = 0
-    at_rest = 0
-    for _ in range(protocol.checks):
-        mujoco.mj_step(m, data, nstep=protocol.steps_per_check)
-        checks_done += 1
-        translation, rotation = _displacement(obj_pose, data.qpos[q : q + 7])
-        if not (translation < protocol.max_translation and rotation < protocol.max_rotation_deg):
-            held = False
-            break
-        if protocol.rest_speed > 0:
-            speed = float(np.linalg.norm(data.qvel[dof : dof + 3]))
-            spin = float(np.linalg.norm(data.qvel[dof + 3 : dof + 6]))
-            fingers = float(np.abs(data.qvel[scene.joint_dof]).max(initial=0.0)) * 0.1
-            left = (protocol.checks - checks_done) * protocol.check_interval
-            resting = max(speed, spin * 0.1, fingers) < protocol.rest_speed
-            safe = (
-                translation + speed * left < 0.9 * protocol.max_translation
-                and rotation + np.degrees(spin) * left < 0.9 * protocol.max_rotation_deg
-            )
-            at_rest = at_rest + 1 if resting and safe else 0
-            if at_rest >= 2:
+    steps = at_rest = 0
+    while steps < total:
+        mujoco.mj_step(m, data, nstep=chunk)
+        steps += chunk
+        if steps % per_check == 0:
+            translation, rotation = _displacement(obj_pose, data.qpos[q : q + 7])
+            if not (
+                translation < protocol.max_translation and rotation < protocol.max_rotation_deg
+            ):
+                held = False
                 break
-    hold_time = checks_done * protocol.steps_per_check * protocol.timestep
+        if protocol.rest_speed > 0 and steps % per_rest == 0:
+            at_rest = at_rest + 1 if _resting(scene, data, dof, obj_pose, protocol, steps) else 0
+            if at_rest >= protocol.rest_checks:
+                translation, rotation = _displacement(obj_pose, data.qpos[q : q + 7])
+                break
     return DirectionResult(
-        tuple(float(x) for x in direction), translation, rotation, held, hold_time
+        tuple(float(x) for x in direction),
+        translation,
+        rotation,
+        held,
+        steps * protocol.timestep,
+    )
+
+
+def _resting(
+    scene: Scene,
+    data: mujoco.MjData,
+    dof: int,
+    obj_pose: np.ndarray,
+    protocol: Protocol,
+    steps: int,
+) -> bool:
+    """Object slower than rest_speed, fingers no longer closing, and even at its current
+    speed the object could not leave the thresholds in the hold time left."""
+    speed = float(np.linalg.norm(data.qvel[dof : dof + 3]))
+    spin = float(np.linalg.norm(data.qvel[dof + 3 : dof + 6]))
+    fingers = float(np.abs(data.qvel[scene.joint_dof]).max(initial=0.0))
+    if max(speed, spin * 0.1) >= protocol.rest_speed or fingers >= protocol.rest_finger_speed:
+        return False
+    q = scene.object_qpos
+    translation, rotation = _displacement(obj_pose, data.qpos[q : q + 7])
+    left = protocol.hold_time - steps * protocol.timestep
+    return (
+        translation + speed * left < 0.9 * protocol.max_translation
+        and rotation + np.degrees(spin) * left < 0.9 * protocol.max_rotation_deg
     )
 
 
