@@ -75,6 +75,9 @@ def test_reference_success_and_failure(rows, hand):
             assert full.success and full.simulated_time == pytest.approx(0.8 + 6 * 2.0)
         else:
             assert not result.directions[-1].held
+            # failure is judged at the protocol's checks only (every 0.2 s), as DexGraspBench does
+            checks = result.directions[-1].hold_time / 0.2
+            assert checks == pytest.approx(round(checks))
 
 
 @needs_reference
@@ -177,6 +180,11 @@ def test_protocol_presets_and_overrides():
         get_protocol("paper", timestep=0)
     with pytest.raises(ProtocolError, match="unknown jacobian"):
         get_protocol("paper", jacobian="banded")
+    with pytest.raises(ProtocolError, match="rest_window must be positive"):
+        get_protocol("paper", rest_window=0.0)
+    # rest checks every 10 steps over 6 checks; failure checks every 50 steps, as before
+    rest = get_protocol("dexgraspbench")
+    assert (rest.steps_per_rest_check, rest.rest_checks, rest.steps_per_check) == (10, 6, 50)
     with pytest.raises(ProtocolError, match="gravity must be a bool"):
         get_protocol("paper", gravity="maybe")  # e.g. --set gravity=maybe
 
