@@ -15,7 +15,7 @@ import statistics
 import time
 from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 from tqdm import tqdm
@@ -41,6 +41,9 @@ class PairRecord:
     solve_times: list[float]
     plan_time: float
     error: str = ""
+    # every candidate's CandidateResult.summary(): features (quality, task quality, anchor
+    # error, pregrasp penetration) and outcome, for fitting a validation order offline
+    candidate_summaries: list[dict] = field(default_factory=list)
 
 
 def pairs(split: str, per_category: int, hands: list[str]) -> list[tuple[str, str, int, str]]:
@@ -102,6 +105,7 @@ def run_pair(args: tuple[str, str, int, str, int, tuple[str, ...]]) -> PairRecor
         candidates=len(result.candidates),
         solve_times=[c.solve.solve_time for c in result.candidates],
         plan_time=elapsed,
+        candidate_summaries=[c.summary() for c in result.candidates],
     )
 
 
@@ -161,7 +165,9 @@ def main() -> None:
     parser.add_argument("--candidates", type=int, default=8)
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--limit", type=int, default=None, help="first N pairs only (quick look)")
-    parser.add_argument("--out", type=Path, default=None, help="write per-pair records (JSONL)")
+    parser.add_argument(
+        "--out", type=Path, default=None, help="write per-pair records with candidates (JSONL)"
+    )
     parser.add_argument(
         "--set",
         nargs="*",

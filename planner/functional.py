@@ -102,7 +102,11 @@ class CandidateResult:
             "success": self.success,
             "part": self.part,
             "quality": self.quality,
+            "task_quality": self.task_quality,
             "validated_as": self.order,
+            "pregrasp_penetration_mm": (
+                None if self.validation is None else 1000 * self.validation["pregrasp_penetration"]
+            ),
             "anchor_error_mm": 1000 * self.solve.anchor_error,
             "min_distance_mm": 1000 * self.solve.min_distance,
             "times": self.times,

@@ -70,6 +70,19 @@ def test_benchmark_setting_overrides():
         planner_settings(4, ["colour=red"])
 
 
+def test_benchmark_records_every_candidate():
+    from eval.planner_benchmark import run_pair
+
+    record = run_pair(("allegro", "bottle", 1, "Hold a bottle by body", 8, ()))
+    assert record.returned_holds and not record.error
+    cands = json.loads(json.dumps(record.candidate_summaries))  # JSONL-ready
+    assert len(cands) == record.candidates
+    validated = [c for c in cands if c["validated_as"] is not None]
+    assert validated and all(c["pregrasp_penetration_mm"] >= 0 for c in validated)
+    assert any(c["success"] and c["part"] == "body" for c in validated)
+    assert all(c["pregrasp_penetration_mm"] is None for c in cands if c["validated_as"] is None)
+
+
 def test_voting_rule_majority_and_far_fingertips():
     points = np.array([[0, 0, 0], [0.1, 0, 0]], dtype=float)
     labels = np.array([0, 1])
