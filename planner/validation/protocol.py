@@ -74,11 +74,9 @@ class Protocol:
     # rest check over `rest_window` s, and even moving at its current speed the object could not
     # leave the thresholds in the time left. Failure is still checked every `check_interval` as
     # the protocol says. Under kp 5 position control the fingers keep creeping into the object at
-    # 0.05-0.2 rad/s long after it is held, so requiring them to stop (as this rule did at
-    # 0.02 rad/s until December 2026) ran most holds to the end. Reference grasps (`drograsp
-    # validate ... --preset dexgraspbench`): 199/200 verdicts agree with DexGraspBench's with this
-    # rule, 200/200 with the stricter one and with full holds (rest_speed 0); median wall time
-    # 0.36-0.44 s vs 1.0 s per grasp (benchmarks/bench_validation.py). rest_speed 0 disables it.
+    # 0.05-0.2 rad/s long after it is held, so waiting for them to stop (0.02 rad/s) ran most
+    # holds to the end. Agreement and speed of both rules: README, "Validation".
+    # rest_speed 0 disables the early exit.
     rest_speed: float = 0.002  # m/s of the object
     rest_finger_speed: float = 0.2  # rad/s: fastest finger joint still counted as at rest
     rest_interval: float = 0.04  # s between rest checks

@@ -53,6 +53,7 @@ class Scene:
     mocap: int
     object_body: int
     object_qpos: int
+    object_dof: int  # dof address of the object's free joint (3 linear, then 3 angular)
     object_geoms: np.ndarray
     hand_body: np.ndarray  # bool per body: part of the hand
     object_mass: float
@@ -146,6 +147,7 @@ def build_scene(hand: HandAdapter, obj: CollisionObject, protocol: Protocol) -> 
         mocap=int(model.body_mocapid[mocap_body]),
         object_body=object_body,
         object_qpos=int(model.jnt_qposadr[obj_joint]),
+        object_dof=int(model.jnt_dofadr[obj_joint]),
         object_geoms=np.flatnonzero(model.geom_bodyid == object_body),
         hand_body=hand_body,
         object_mass=float(model.body_subtreemass[object_body]),

@@ -208,7 +208,6 @@ def _hold(
         protocol.force_scale * protocol.object_mass * direction
     )
     q = scene.object_qpos
-    dof = int(m.jnt_dofadr[m.body_jntadr[scene.object_body]])
     per_check, per_rest = protocol.steps_per_check, protocol.steps_per_rest_check
     chunk = math.gcd(per_check, per_rest)
     total = protocol.checks * per_check
@@ -218,17 +217,22 @@ def _hold(
     while steps < total:
         mujoco.mj_step(m, data, nstep=chunk)
         steps += chunk
-        if steps % per_check == 0:
-            translation, rotation = _displacement(obj_pose, data.qpos[q : q + 7])
-            if not (
-                translation < protocol.max_translation and rotation < protocol.max_rotation_deg
-            ):
-                held = False
-                break
-        if protocol.rest_speed > 0 and steps % per_rest == 0:
-            at_rest = at_rest + 1 if _resting(scene, data, dof, obj_pose, protocol, steps) else 0
+        check = steps % per_check == 0
+        rest_check = protocol.rest_speed > 0 and steps % per_rest == 0
+        if not (check or rest_check):
+            continue
+        translation, rotation = _displacement(obj_pose, data.qpos[q : q + 7])
+        if check and not (
+            translation < protocol.max_translation and rotation < protocol.max_rotation_deg
+        ):
+            held = False
+            break
+        if rest_check:
+            left = protocol.hold_time - steps * protocol.timestep
+            at_rest = (
+                at_rest + 1 if _resting(scene, data, translation, rotation, left, protocol) else 0
+            )
             if at_rest >= protocol.rest_checks:
-                translation, rotation = _displacement(obj_pose, data.qpos[q : q + 7])
                 break
     return DirectionResult(
         tuple(float(x) for x in direction),
@@ -242,21 +246,19 @@ def _hold(
 def _resting(
     scene: Scene,
     data: mujoco.MjData,
-    dof: int,
-    obj_pose: np.ndarray,
+    translation: float,
+    rotation: float,
+    left: float,
     protocol: Protocol,
-    steps: int,
 ) -> bool:
     """Object slower than rest_speed, fingers no longer closing, and even at its current
-    speed the object could not leave the thresholds in the hold time left."""
+    speed the object could not leave the thresholds in the `left` s of the hold."""
+    dof = scene.object_dof
     speed = float(np.linalg.norm(data.qvel[dof : dof + 3]))
     spin = float(np.linalg.norm(data.qvel[dof + 3 : dof + 6]))
     fingers = float(np.abs(data.qvel[scene.joint_dof]).max(initial=0.0))
     if max(speed, spin * 0.1) >= protocol.rest_speed or fingers >= protocol.rest_finger_speed:
         return False
-    q = scene.object_qpos
-    translation, rotation = _displacement(obj_pose, data.qpos[q : q + 7])
-    left = protocol.hold_time - steps * protocol.timestep
     return (
         translation + speed * left < 0.9 * protocol.max_translation
         and rotation + np.degrees(spin) * left < 0.9 * protocol.max_rotation_deg
