@@ -29,6 +29,7 @@ from pydrake.systems.framework import DiagramBuilder
 
 from models.errors import PlanningError
 from models.hands import HandModel
+from planner.squeeze import balanced_forces
 from planner.validation.objects import CollisionObject, as_collision_object
 
 
@@ -49,7 +50,19 @@ class ProgramSettings:
     major_optimality: float = 1e-3
     major_feasibility: float = 1e-5
     major_iterations: int = 150
+    # How the pregrasp backs off, which sets the squeeze forces: "balanced" (fingertip forces
+    # chosen to cancel, planner.squeeze) or "normal" (each fingertip 1 cm back along its normal)
+    pregrasp_rule: str = "balanced"
     squeeze_depth: float = 1.0  # squeeze = grasp + depth x (grasp - pregrasp); 1 is BODex's rule
+
+    def __post_init__(self) -> None:
+        if self.pregrasp_rule not in PREGRASP_RULES:
+            raise PlanningError(
+                f"unknown pregrasp_rule {self.pregrasp_rule!r}; use one of {PREGRASP_RULES}"
+            )
+
+
+PREGRASP_RULES = ("balanced", "normal")
 
 
 @dataclass
@@ -308,28 +321,53 @@ class GraspProgram:
         clearance: float = 0.01,
     ) -> np.ndarray:
         """BODex's pregrasp: the grasp with contacts about `clearance` off the surface, same
-        wrist. With the object's outward normals at the anchor fingertips, each finger's joints
-        move its tip back along its normal (damped least squares on the fingertip Jacobian), so
-        the squeeze (2 x grasp - pregrasp) then presses along the normals instead of sliding
-        the object away; the other joints move toward the open pose by the same fraction."""
+        wrist, so that the squeeze (2 x grasp - pregrasp) presses. With the object's outward
+        normals at the anchor fingertips, each finger's joints move by the offset that sets its
+        squeeze force (`settings.pregrasp_rule`, see planner.squeeze), scaled so the fingertips
+        back off `clearance` along their normals on average; the other joints move toward the
+        open pose by 0.3 of the way."""
         q = np.asarray(q, dtype=float)
         if tip_normals is None:
             return self._pregrasp_toward_open(wrist, q, clearance)
         self.set_configuration(wrist, q)
         plant, world = self.plant, self.plant.world_frame()
         joints = self.handle.joint_velocity_index
-        delta = np.zeros(self.hand.dof)
-        moved = np.zeros(self.hand.dof, dtype=bool)
-        for tip, frame, normal in zip(self.tips, self.tip_frames, tip_normals, strict=True):
-            jac = plant.CalcJacobianTranslationalVelocity(
+        normals = np.asarray(tip_normals, dtype=float)
+        normals = normals / np.linalg.norm(normals, axis=1, keepdims=True)
+        jacobians = [
+            plant.CalcJacobianTranslationalVelocity(
                 self.plant_context, JacobianWrtVariable.kV, frame, tip.point, world, world
             )[:, joints]
+            for tip, frame in zip(self.tips, self.tip_frames, strict=True)
+        ]
+        if self.settings.pregrasp_rule == "balanced":
+            centres = np.array(
+                [
+                    plant.CalcPointsPositions(self.plant_context, frame, tip.point[:, None], world)[
+                        :, 0
+                    ]
+                    for tip, frame in zip(self.tips, self.tip_frames, strict=True)
+                ]
+            )
+            radii = np.array([t.radius for t in self.tips])[:, None]
+            forces, _ = balanced_forces(centres - radii * normals, -normals)
+        delta = np.zeros(self.hand.dof)
+        moved = np.zeros(self.hand.dof, dtype=bool)
+        backoff = []  # each fingertip's motion along its outward normal, pregrasp - grasp
+        for i, jac in enumerate(jacobians):
             cols = np.flatnonzero(np.abs(jac).sum(axis=0) > 1e-9)
             cols = cols[~moved[cols]]  # joints shared with an earlier finger stay put
             j = jac[:, cols]
-            step = j.T @ np.linalg.solve(j @ j.T + 1e-4 * np.eye(3), normal * clearance)
+            if self.settings.pregrasp_rule == "balanced":
+                # position control: torque = kp x (squeeze - q) = kp x (q - pregrasp), and a
+                # fingertip force f needs torque J^T f, so the offset is proportional to J^T f
+                step = -(j.T @ forces[i])
+            else:  # the fingertip straight back along its normal (damped least squares)
+                step = j.T @ np.linalg.solve(j @ j.T + 1e-4 * np.eye(3), normals[i])
             delta[cols] += step
             moved[cols] = True
+            backoff.append(float(normals[i] @ (j @ step)))
+        delta *= clearance / max(float(np.mean(backoff)), 1e-9)
         rest = ~moved
         delta[rest] = 0.3 * (self.hand.open_pose[rest] - q[rest])
         return np.clip(q + delta, self.hand.lower, self.hand.upper)

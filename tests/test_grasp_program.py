@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import trimesh
 
+from models.errors import PlanningError
 from models.hands import load_hand
 from models.objects import make_object
 from planner.functional import FunctionalPlanner
@@ -78,3 +79,57 @@ def test_squeeze_follows_bodex_rule():
     np.testing.assert_allclose(
         program.squeeze(q, pre), np.clip(2 * q - pre, hand.lower, hand.upper)
     )
+
+
+def _tip_forces(program, wrist, q, squeeze) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Anchor fingertip centres, and the forces (per unit kp) the squeeze's joint offsets make
+    them push with: least squares of J^T f = squeeze - grasp over each finger's joints."""
+    from pydrake.multibody.tree import JacobianWrtVariable
+
+    program.set_configuration(wrist, q)
+    plant, world = program.plant, program.plant.world_frame()
+    joints = program.handle.joint_velocity_index
+    centres, forces = [], []
+    for tip, frame in zip(program.tips, program.tip_frames, strict=True):
+        jac = plant.CalcJacobianTranslationalVelocity(
+            program.plant_context, JacobianWrtVariable.kV, frame, tip.point, world, world
+        )[:, joints]
+        cols = np.flatnonzero(np.abs(jac).sum(axis=0) > 1e-9)
+        forces.append(np.linalg.lstsq(jac[:, cols].T, (squeeze - q)[cols], rcond=None)[0])
+        centres.append(
+            plant.CalcPointsPositions(program.plant_context, frame, tip.point[:, None], world)[:, 0]
+        )
+    return np.array(centres), np.array(forces), np.array([t.radius for t in program.tips])
+
+
+def test_balanced_pregrasp_backs_off_and_balances_the_squeeze(hand_name):
+    hand = load_hand(hand_name)
+    obj = make_object("bottle", 1)
+    proposal = FunctionalPlanner(hand).propose(obj, "body")[0]
+    targets = GraspTargets(proposal.wrist, proposal.q, proposal.anchors, proposal.normals)
+    nets = {}
+    for rule in ("normal", "balanced"):
+        program = grasp_program(hand, obj.collision_pieces(), ProgramSettings(pregrasp_rule=rule))
+        solved = program.solve(targets)
+        assert solved.ok, solved.message
+        centres, _, _ = _tip_forces(program, solved.wrist, solved.q, solved.q)
+        nearest = np.argmin(np.linalg.norm(obj.points[None] - centres[:, None], axis=2), axis=1)
+        normals = obj.normals[nearest]
+        pre = program.pregrasp(solved.wrist, solved.q, normals)
+        squeeze = program.squeeze(solved.q, pre)
+        pre_centres, _, _ = _tip_forces(program, solved.wrist, pre, pre)
+        backoff = np.einsum("ij,ij->i", pre_centres - centres, normals)
+        assert np.all(backoff > 0), backoff  # every anchor fingertip leaves the surface
+        assert 0.005 < backoff.mean() < 0.015  # about the 1 cm clearance on average
+        centres, forces, radii = _tip_forces(program, solved.wrist, solved.q, squeeze)
+        points = centres - radii[:, None] * normals
+        net = np.concatenate(
+            [forces.sum(axis=0), np.cross(points - points.mean(axis=0), forces).sum(axis=0) / 0.03]
+        )
+        nets[rule] = np.linalg.norm(net) / np.linalg.norm(forces, axis=1).sum()
+    assert nets["balanced"] < nets["normal"], nets
+
+
+def test_unknown_pregrasp_rule_is_a_clear_error():
+    with pytest.raises(PlanningError, match="pregrasp_rule"):
+        ProgramSettings(pregrasp_rule="tight")
