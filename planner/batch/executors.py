@@ -74,6 +74,24 @@ def _pool(workers: int, job_fn: JobFn) -> ProcessPoolExecutor:
     return ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_one_thread)
 
 
+def _submit(
+    pool: ProcessPoolExecutor,
+    job_fn: JobFn,
+    inflight: dict[Future, tuple[Indexed, bool]],
+    item: Indexed,
+    alone: bool,
+    origin: list[Indexed],
+) -> bool:
+    """Submit one job; False if the pool broke before this submission (a worker died since the
+    last wait), and the job goes back to `origin` untried."""
+    try:
+        inflight[pool.submit(run_one, job_fn, item[1])] = (item, alone)
+    except BrokenProcessPool:
+        origin.append(item)
+        return False
+    return True
+
+
 def run_pool(job_fn: JobFn, items: Sequence[Indexed], workers: int) -> Iterator[tuple[int, dict]]:
     """A local process pool with at most 2 jobs queued per worker (memory stays flat on big
     batches). A worker that dies (segfault, OOM) breaks the pool: the pool is rebuilt and the
@@ -89,13 +107,11 @@ def run_pool(job_fn: JobFn, items: Sequence[Indexed], workers: int) -> Iterator[
             while not broken:
                 alone_running = any(alone for _, alone in inflight.values())
                 if suspects and not inflight:
-                    item = suspects.pop()
-                    inflight[pool.submit(run_one, job_fn, item[1])] = (item, True)
+                    broken = not _submit(pool, job_fn, inflight, suspects.pop(), True, suspects)
                 elif not suspects and not alone_running:
-                    while queue and len(inflight) < 2 * workers:
-                        item = queue.pop()
-                        inflight[pool.submit(run_one, job_fn, item[1])] = (item, False)
-                if not inflight:
+                    while not broken and queue and len(inflight) < 2 * workers:
+                        broken = not _submit(pool, job_fn, inflight, queue.pop(), False, queue)
+                if broken or not inflight:
                     break
                 done, _ = wait(inflight, return_when=FIRST_COMPLETED)
                 for future in done:
