@@ -400,9 +400,9 @@ class FinishedGrasp:
 def finish_grasp(
     program: GraspProgram, obj: ObjectModel, solved: SolveResult, instruction: str, protocol: str
 ) -> FinishedGrasp:
-    """Pregrasp (back along the surface normals at the anchor fingertips), BODex squeeze, the
-    Grasp record, MuJoCo validation and the voted part: every planned or transferred grasp
-    goes through these same steps."""
+    """Pregrasp (anchor fingertips about 1 cm off the surface, offsets set by balanced squeeze
+    forces: GraspProgram.pregrasp), BODex squeeze, the Grasp record, MuJoCo validation and the
+    voted part: every planned or transferred grasp goes through these same steps."""
     t1 = time.perf_counter()
     hand = program.hand
     wrist_t = torch.tensor(solved.wrist[None])
