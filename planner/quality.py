@@ -18,6 +18,15 @@ from scipy.spatial import ConvexHull, QhullError
 AXES = np.concatenate([np.eye(3), -np.eye(3)])  # the validator's test forces
 
 
+def cone_edges(inward: np.ndarray, mu: float, edges: int) -> np.ndarray:
+    """(edges, 3) generators n + mu t of the linearised friction cone about the unit `inward`."""
+    t1 = np.cross(inward, [1.0, 0, 0] if abs(inward[0]) < 0.9 else [0, 1.0, 0])
+    t1 /= np.linalg.norm(t1)
+    t2 = np.cross(inward, t1)
+    angles = 2 * np.pi * np.arange(edges) / edges
+    return inward + mu * (np.cos(angles)[:, None] * t1 + np.sin(angles)[:, None] * t2)
+
+
 def friction_wrenches(
     points: np.ndarray,
     inward_normals: np.ndarray,
@@ -29,14 +38,8 @@ def friction_wrenches(
     """(contacts * edges, 6) unit-force wrenches on the object at its friction-cone edges."""
     out = []
     for p, n in zip(points, inward_normals, strict=True):
-        n = n / np.linalg.norm(n)
-        t1 = np.cross(n, [1.0, 0, 0] if abs(n[0]) < 0.9 else [0, 1.0, 0])
-        t1 /= np.linalg.norm(t1)
-        t2 = np.cross(n, t1)
-        for k in range(edges):
-            a = 2 * np.pi * k / edges
-            f = n + mu * (np.cos(a) * t1 + np.sin(a) * t2)
-            f /= np.linalg.norm(f)
+        for f in cone_edges(n / np.linalg.norm(n), mu, edges):
+            f = f / np.linalg.norm(f)
             out.append(np.concatenate([f, np.cross(p - centre, f) / length]))
     return np.asarray(out)
 

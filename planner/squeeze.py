@@ -15,14 +15,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import nnls
 
-
-def _cone_edges(inward: np.ndarray, mu: float, edges: int) -> np.ndarray:
-    """(edges, 3) generators of the linearised friction cone about `inward` (unit)."""
-    t1 = np.cross(inward, [1.0, 0, 0] if abs(inward[0]) < 0.9 else [0, 1.0, 0])
-    t1 /= np.linalg.norm(t1)
-    t2 = np.cross(inward, t1)
-    angles = 2 * np.pi * np.arange(edges) / edges
-    return inward + mu * (np.cos(angles)[:, None] * t1 + np.sin(angles)[:, None] * t2)
+from planner.quality import cone_edges
 
 
 def balanced_forces(
@@ -50,7 +43,7 @@ def balanced_forces(
         return np.concatenate([f, np.cross(p - centre, f) / length])
 
     base = sum(wrench(p, n) for p, n in zip(points, inward, strict=True))
-    generators = [_cone_edges(n, mu, edges) for n in inward]
+    generators = [cone_edges(n, mu, edges) for n in inward]
     columns = np.array(
         [wrench(p, e) for p, gens in zip(points, generators, strict=True) for e in gens]
     ).T
