@@ -3,11 +3,11 @@
 Until the learned priors exist this is how a wrist pose and anchors are proposed: the
 instructed part's points are analysed (principal axes), the thumb is put on one side of the
 part and the three other anchor fingers on the opposite side, spread along the part's long
-axis at the hand's own finger spacing, and the palm faces the part from the side with the
-most free space. Each proposal goes through the Drake grasp program and MuJoCo validation;
-solved candidates are validated best first (force-closure quality of their contacts), and the
-first grasp that holds and touches the instructed part is returned with every candidate's
-outcome.
+axis at the hand's own finger spacing, with the palm facing the part from every direction
+around that axis. Proposals whose anchors give the best force closure are solved first; each
+goes through the Drake grasp program and MuJoCo validation. Solved candidates are validated
+best first (force-closure quality of their contacts), and the first grasp that holds and
+touches the instructed part is returned with every candidate's outcome.
 """
 
 from __future__ import annotations
@@ -60,14 +60,22 @@ class PlannerSettings:
     validate_all: bool = False
     mass_centred: bool = True  # anchors near the object's centre of mass along the part
     ranking: str = "task"  # validation order: "task" or "epsilon" (planner.quality)
+    # solve order of the proposals: "anchors" (force closure of the planned anchors, best
+    # first) or "clearance" (free space for the palm, the earlier order)
+    proposal_order: str = "anchors"
     program: ProgramSettings = field(default_factory=ProgramSettings)
 
     def __post_init__(self) -> None:
         if self.ranking not in RANKINGS:
             raise PlanningError(f"unknown ranking {self.ranking!r}; use one of {RANKINGS}")
+        if self.proposal_order not in PROPOSAL_ORDERS:
+            raise PlanningError(
+                f"unknown proposal_order {self.proposal_order!r}; use one of {PROPOSAL_ORDERS}"
+            )
 
 
 RANKINGS = ("task", "epsilon")
+PROPOSAL_ORDERS = ("anchors", "clearance")
 
 
 @dataclass
@@ -76,8 +84,11 @@ class Proposal:
     q: np.ndarray
     anchors: np.ndarray  # (4, 3) in anchor-finger order
     normals: np.ndarray  # (4, 3)
-    score: float
+    score: float  # free space for the palm plus outwardness: breaks anchor-quality ties
     palm_target: np.ndarray | None = None
+    # epsilon (planner.quality) of the anchors pushing along their inward normals, about the
+    # object's centre of mass: proposals are solved in this order, best first
+    anchor_quality: float = -1.0
 
 
 @dataclass
@@ -221,7 +232,8 @@ class FunctionalPlanner:
         tree = cKDTree(points)
         # Anchors sit on the part as near the object's centre of mass as the part allows: a
         # handle held at its far end lets gravity twist a knife or pan out of the fingers.
-        t_mass = float((points.mean(axis=0) - centre) @ e1) if self.settings.mass_centred else 0.0
+        com = points.mean(axis=0)
+        t_mass = float((com - centre) @ e1) if self.settings.mass_centred else 0.0
         proposals = []
         for theta in np.deg2rad(np.arange(0, 360, self.settings.approach_step_deg)):
             v = np.cos(theta) * e2 + np.sin(theta) * e3  # palm -> object, across the long axis
@@ -231,12 +243,18 @@ class FunctionalPlanner:
                 )
                 u = rot.apply(geo.opposition)  # thumb -> fingers, in the world
                 proposals.append(
-                    self._proposal(pts, nrm, t, t_mass, centre, rot, u, v, e1, spacing, tree)
+                    self._proposal(pts, nrm, t, t_mass, centre, rot, u, v, e1, spacing, tree, com)
                 )
-        proposals.sort(key=lambda p: -p.score)
+        # Best anchor force closure first: on 150 train pairs with every candidate validated, the
+        # top quarter of proposals by anchor epsilon held 46-70% of the time (bottom quarter
+        # 5-9%), while the palm-clearance score did not predict holding (README, "Status").
+        if self.settings.proposal_order == "anchors":
+            proposals.sort(key=lambda p: (-p.anchor_quality, -p.score))
+        else:
+            proposals.sort(key=lambda p: -p.score)
         return proposals[: self.settings.max_proposals]
 
-    def _proposal(self, pts, nrm, t, t_mass, centre, rot, u, v, e1, spacing, tree) -> Proposal:
+    def _proposal(self, pts, nrm, t, t_mass, centre, rot, u, v, e1, spacing, tree, com) -> Proposal:
         geo = self.geometry
         lateral_sign = np.sign(rot.apply(geo.lateral) @ e1) or 1.0
         half_width = max(0.006, 0.15 * (t.max() - t.min()))
@@ -275,7 +293,8 @@ class FunctionalPlanner:
             nearest = pts[near_line][np.argmin(pts[near_line] @ v)]
             palm_target = nearest - v * self.settings.palm_margin
         score = clearance + 0.1 * outward
-        return Proposal(wrist, geo.q_half.copy(), anchors, normals, score, palm_target)
+        quality = contact_quality(anchors, -normals, com).epsilon
+        return Proposal(wrist, geo.q_half.copy(), anchors, normals, score, palm_target, quality)
 
     # ---- planning -------------------------------------------------------------------------
     def plan(self, obj: ObjectModel, instruction: Instruction | str) -> PlanResult:

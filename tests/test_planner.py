@@ -15,7 +15,7 @@ from models.errors import InstructionError, PlanningError
 from models.grasp import Grasp
 from models.objects import load_object, make_object
 from planner import plan_grasp
-from planner.functional import FunctionalPlanner
+from planner.functional import FunctionalPlanner, PlannerSettings
 from planner.labels import voted_part
 
 
@@ -214,3 +214,20 @@ def test_task_quality_needs_closure_and_falls_with_a_far_centre_of_mass():
     assert centred > 0
     assert contact_quality(points[:2], inward[:2], np.zeros(3)).task < 0  # a pinch: no closure
     assert 0 < contact_quality(points, inward, np.array([0, 0, 0.05])).task < centred
+
+
+def test_proposals_are_solved_best_anchor_closure_first(hand_name):
+    from planner.quality import contact_quality
+
+    obj = make_object("mug", 3)
+    proposals = FunctionalPlanner(hand_name).propose(obj, "handle")
+    qualities = [p.anchor_quality for p in proposals]
+    assert qualities == sorted(qualities, reverse=True)
+    best = proposals[0]
+    expected = contact_quality(best.anchors, -best.normals, obj.points.mean(axis=0)).epsilon
+    assert best.anchor_quality == pytest.approx(expected)
+    earlier = FunctionalPlanner(hand_name, PlannerSettings(proposal_order="clearance"))
+    scores = [p.score for p in earlier.propose(obj, "handle")]
+    assert scores == sorted(scores, reverse=True)
+    with pytest.raises(PlanningError, match="proposal_order"):
+        PlannerSettings(proposal_order="random")
