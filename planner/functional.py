@@ -246,7 +246,7 @@ class FunctionalPlanner:
                     self._proposal(pts, nrm, t, t_mass, centre, rot, u, v, e1, spacing, tree, com)
                 )
         # Best anchor force closure first: on 150 train pairs with every candidate validated, the
-        # top quarter of proposals by anchor epsilon held 46-70% of the time (bottom quarter
+        # top quarter of proposals by anchor epsilon held 30-70% of the time (bottom quarter
         # 5-9%), while the palm-clearance score did not predict holding (README, "Status").
         if self.settings.proposal_order == "anchors":
             proposals.sort(key=lambda p: (-p.anchor_quality, -p.score))
