@@ -209,15 +209,23 @@ class GraspProgram:
             normals.append(n_into)
         return np.asarray(points).reshape(-1, 3), np.asarray(normals).reshape(-1, 3)
 
-    def anchor_error(self, wrist: np.ndarray, q: np.ndarray, anchors: np.ndarray) -> float:
+    def tip_centres(self, wrist: np.ndarray, q: np.ndarray) -> np.ndarray:
+        """(4, 3) world centres of the anchor fingertip spheres, in anchor-finger order."""
         self.set_configuration(wrist, q)
-        worst = 0.0
-        for tip, frame, anchor in zip(self.tips, self.tip_frames, anchors, strict=True):
-            centre = self.plant.CalcPointsPositions(
-                self.plant_context, frame, tip.point[:, None], self.plant.world_frame()
-            )[:, 0]
-            worst = max(worst, abs(np.linalg.norm(centre - anchor) - tip.radius))
-        return worst
+        world = self.plant.world_frame()
+        return np.array(
+            [
+                self.plant.CalcPointsPositions(
+                    self.plant_context, frame, tip.point[:, None], world
+                )[:, 0]
+                for tip, frame in zip(self.tips, self.tip_frames, strict=True)
+            ]
+        )
+
+    def anchor_error(self, wrist: np.ndarray, q: np.ndarray, anchors: np.ndarray) -> float:
+        centres = self.tip_centres(wrist, q)
+        radii = np.array([t.radius for t in self.tips])
+        return float(np.max(np.abs(np.linalg.norm(centres - anchors, axis=1) - radii)))
 
     # ---- the program ----------------------------------------------------------------------
     def solve(self, targets: GraspTargets) -> SolveResult:
@@ -329,7 +337,7 @@ class GraspProgram:
         q = np.asarray(q, dtype=float)
         if tip_normals is None:
             return self._pregrasp_toward_open(wrist, q, clearance)
-        self.set_configuration(wrist, q)
+        centres = self.tip_centres(wrist, q)  # also sets the configuration
         plant, world = self.plant, self.plant.world_frame()
         joints = self.handle.joint_velocity_index
         normals = np.asarray(tip_normals, dtype=float)
@@ -341,14 +349,6 @@ class GraspProgram:
             for tip, frame in zip(self.tips, self.tip_frames, strict=True)
         ]
         if self.settings.pregrasp_rule == "balanced":
-            centres = np.array(
-                [
-                    plant.CalcPointsPositions(self.plant_context, frame, tip.point[:, None], world)[
-                        :, 0
-                    ]
-                    for tip, frame in zip(self.tips, self.tip_frames, strict=True)
-                ]
-            )
             radii = np.array([t.radius for t in self.tips])[:, None]
             forces, _ = balanced_forces(centres - radii * normals, -normals)
         delta = np.zeros(self.hand.dof)

@@ -81,25 +81,22 @@ def test_squeeze_follows_bodex_rule():
     )
 
 
-def _tip_forces(program, wrist, q, squeeze) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Anchor fingertip centres, and the forces (per unit kp) the squeeze's joint offsets make
-    them push with: least squares of J^T f = squeeze - grasp over each finger's joints."""
+def _squeeze_forces(program, wrist, q, squeeze) -> np.ndarray:
+    """The forces (per unit kp) the squeeze's joint offsets make the anchor fingertips push
+    with: least squares of J^T f = squeeze - grasp over each finger's joints."""
     from pydrake.multibody.tree import JacobianWrtVariable
 
     program.set_configuration(wrist, q)
     plant, world = program.plant, program.plant.world_frame()
     joints = program.handle.joint_velocity_index
-    centres, forces = [], []
+    forces = []
     for tip, frame in zip(program.tips, program.tip_frames, strict=True):
         jac = plant.CalcJacobianTranslationalVelocity(
             program.plant_context, JacobianWrtVariable.kV, frame, tip.point, world, world
         )[:, joints]
         cols = np.flatnonzero(np.abs(jac).sum(axis=0) > 1e-9)
         forces.append(np.linalg.lstsq(jac[:, cols].T, (squeeze - q)[cols], rcond=None)[0])
-        centres.append(
-            plant.CalcPointsPositions(program.plant_context, frame, tip.point[:, None], world)[:, 0]
-        )
-    return np.array(centres), np.array(forces), np.array([t.radius for t in program.tips])
+    return np.array(forces)
 
 
 def test_balanced_pregrasp_backs_off_and_balances_the_squeeze(hand_name):
@@ -112,16 +109,17 @@ def test_balanced_pregrasp_backs_off_and_balances_the_squeeze(hand_name):
         program = grasp_program(hand, obj.collision_pieces(), ProgramSettings(pregrasp_rule=rule))
         solved = program.solve(targets)
         assert solved.ok, solved.message
-        centres, _, _ = _tip_forces(program, solved.wrist, solved.q, solved.q)
+        centres = program.tip_centres(solved.wrist, solved.q)
         nearest = np.argmin(np.linalg.norm(obj.points[None] - centres[:, None], axis=2), axis=1)
         normals = obj.normals[nearest]
         pre = program.pregrasp(solved.wrist, solved.q, normals)
         squeeze = program.squeeze(solved.q, pre)
-        pre_centres, _, _ = _tip_forces(program, solved.wrist, pre, pre)
+        pre_centres = program.tip_centres(solved.wrist, pre)
         backoff = np.einsum("ij,ij->i", pre_centres - centres, normals)
         assert np.all(backoff > 0), backoff  # every anchor fingertip leaves the surface
         assert 0.005 < backoff.mean() < 0.015  # about the 1 cm clearance on average
-        centres, forces, radii = _tip_forces(program, solved.wrist, solved.q, squeeze)
+        forces = _squeeze_forces(program, solved.wrist, solved.q, squeeze)
+        radii = np.array([t.radius for t in program.tips])
         points = centres - radii[:, None] * normals
         net = np.concatenate(
             [forces.sum(axis=0), np.cross(points - points.mean(axis=0), forces).sum(axis=0) / 0.03]
