@@ -51,3 +51,21 @@ def test_sheet_writes_a_png(tmp_path):
     out = tmp_path / "sheet.png"
     assert _run(["objects", "sheet", str(out)]) == 0
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and out.stat().st_size > 50_000
+
+
+def test_output_piped_into_head_ends_without_a_traceback():
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    code = "import sys; from planner import cli; sys.exit(cli.main(sys.argv[1:]))"
+    listing = subprocess.Popen(
+        [sys.executable, "-c", code, "objects"],
+        cwd=Path(__file__).resolve().parents[1],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
+    listing.stdout.readline()
+    listing.stdout.close()  # what `| head -1` does
+    _, err = listing.communicate(timeout=120)
+    assert b"Traceback" not in err, err.decode()
