@@ -47,6 +47,9 @@ class ProgramSettings:
     influence_distance: float = 0.01
     penetration_tolerance: float = 0.002  # accepted penetration when checking an answer (m)
     anchor_tolerance: float = 0.025  # accepted fingertip-surface to anchor distance (m)
+    # deepest hand-object penetration left at the pregrasp (m); shallower ones are not worth
+    # weakening the squeeze for (GraspProgram.clear_of_object)
+    pregrasp_penetration: float = 0.001
     major_optimality: float = 1e-3
     major_feasibility: float = 1e-5
     major_iterations: int = 150
@@ -370,7 +373,35 @@ class GraspProgram:
         delta *= clearance / max(float(np.mean(backoff)), 1e-9)
         rest = ~moved
         delta[rest] = 0.3 * (self.hand.open_pose[rest] - q[rest])
-        return np.clip(q + delta, self.hand.lower, self.hand.upper)
+        return self.clear_of_object(wrist, q, delta, moved)
+
+    # (anchor-finger offset scale, other joints' scale), tried in order by clear_of_object
+    PREGRASP_SCALES = ((1.0, 1.0), (1.0, 0.0), (0.7, 0.0), (0.5, 0.0), (0.35, 0.0), (0.25, 0.0))
+
+    def clear_of_object(
+        self, wrist: np.ndarray, q: np.ndarray, delta: np.ndarray, anchor_joints: np.ndarray
+    ) -> np.ndarray:
+        """The pregrasp q + delta, shrunk until no link is deeper in the object than
+        `settings.pregrasp_penetration` (or than at the grasp, if deeper there).
+
+        MuJoCo starts the closing from the pregrasp, so a link inside the object kicks it away
+        before any finger closes: on the 300 test pairs 104 of Shadow's 228 validated candidates
+        (30 of Allegro's 261) had a pregrasp over 1 mm deep, and 3 of them held. The offsets
+        that back the fingertips off can swing a middle or distal link into the part (mug
+        handles), and opening a non-anchor finger can push it in (Shadow's little finger). The
+        other joints are kept at the grasp first, then the anchor offsets are scaled down
+        together, which keeps the squeeze forces' balance and only weakens them."""
+        bound = min(-self.settings.pregrasp_penetration, self.hand_object_distance(wrist, q))
+        best, best_distance = None, -np.inf
+        for anchor_scale, rest_scale in self.PREGRASP_SCALES:
+            scaled = np.where(anchor_joints, anchor_scale, rest_scale) * delta
+            pre = np.clip(q + scaled, self.hand.lower, self.hand.upper)
+            distance = self.hand_object_distance(wrist, pre)
+            if distance >= bound:
+                return pre
+            if distance > best_distance:
+                best, best_distance = pre, distance
+        return best
 
     def _pregrasp_toward_open(
         self, wrist: np.ndarray, q: np.ndarray, clearance: float

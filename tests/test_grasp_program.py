@@ -128,6 +128,32 @@ def test_balanced_pregrasp_backs_off_and_balances_the_squeeze(hand_name):
     assert nets["balanced"] < nets["normal"], nets
 
 
+def test_pregrasp_offsets_shrink_until_clear_of_the_object(hand_name):
+    hand = load_hand(hand_name)
+    obj = make_object("bottle", 1)
+    proposal = FunctionalPlanner(hand).propose(obj, "body")[0]
+    program = grasp_program(hand, obj.collision_pieces())
+    solved = program.solve(
+        GraspTargets(proposal.wrist, proposal.q, proposal.anchors, proposal.normals)
+    )
+    assert solved.ok, solved.message
+    wrist, q = solved.wrist, solved.q
+    anchor_joints = np.ones(hand.dof, dtype=bool)
+    # an offset that closes every joint a little further drives the fingers 3-5 mm into the bottle
+    inward = 0.015 * hand.closing_direction * (hand.upper - hand.lower)
+    assert program.hand_object_distance(wrist, np.clip(q + inward, hand.lower, hand.upper)) < -0.002
+    pre = program.clear_of_object(wrist, q, inward, anchor_joints)
+    bound = min(-program.settings.pregrasp_penetration, program.hand_object_distance(wrist, q))
+    assert program.hand_object_distance(wrist, pre) >= bound
+    scales = [a for a, _ in program.PREGRASP_SCALES]
+    assert any(np.allclose(pre, np.clip(q + a * inward, hand.lower, hand.upper)) for a in scales)
+    assert not np.allclose(pre, np.clip(q + inward, hand.lower, hand.upper))
+    # an offset that opens the hand leaves the object alone and is kept as it is
+    outward = -0.5 * inward
+    kept = program.clear_of_object(wrist, q, outward, anchor_joints)
+    assert np.allclose(kept, np.clip(q + outward, hand.lower, hand.upper))
+
+
 def test_unknown_pregrasp_rule_is_a_clear_error():
     with pytest.raises(PlanningError, match="pregrasp_rule"):
         ProgramSettings(pregrasp_rule="tight")
