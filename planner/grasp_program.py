@@ -385,7 +385,7 @@ class GraspProgram:
         `settings.pregrasp_penetration` (or than at the grasp, if deeper there).
 
         MuJoCo starts the closing from the pregrasp, so a link inside the object kicks it away
-        before any finger closes: on the 300 test pairs 104 of Shadow's 228 validated candidates
+        before any finger closes: on the 300 test pairs 107 of Shadow's 228 validated candidates
         (30 of Allegro's 261) had a pregrasp over 1 mm deep, and 3 of them held. The offsets
         that back the fingertips off can swing a middle or distal link into the part (mug
         handles), and opening a non-anchor finger can push it in (Shadow's little finger). The
