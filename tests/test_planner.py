@@ -71,7 +71,7 @@ def test_benchmark_setting_overrides():
 
 
 def test_benchmark_records_every_candidate():
-    from eval.planner_benchmark import run_pair
+    from eval.planner_benchmark import run_pair, summarize
 
     record = run_pair(("allegro", "bottle", 1, "Hold a bottle by body", 8, ()))
     assert record.returned_holds and not record.error
@@ -81,6 +81,8 @@ def test_benchmark_records_every_candidate():
     assert validated and all(c["pregrasp_penetration_mm"] >= 0 for c in validated)
     assert any(c["success"] and c["part"] == "body" for c in validated)
     assert all(c["pregrasp_penetration_mm"] is None for c in cands if c["validated_as"] is None)
+    row = summarize([record])[0]
+    assert row["returned_success"] == 1.0 and row["mean_solves_per_returned_grasp"] == len(cands)
 
 
 def test_voting_rule_majority_and_far_fingertips():
@@ -231,3 +233,16 @@ def test_proposals_are_solved_best_anchor_closure_first(hand_name):
     assert scores == sorted(scores, reverse=True)
     with pytest.raises(PlanningError, match="proposal_order"):
         PlannerSettings(proposal_order="random")
+
+
+def test_proposals_are_solved_a_batch_at_a_time():
+    obj = make_object("bottle", 1)
+    for batch in (1, 2, 4):
+        planner = FunctionalPlanner("allegro", PlannerSettings(solve_batch=batch))
+        result = planner.plan(obj, "Hold a bottle by body")
+        assert result.success
+        solved = len(result.candidates)
+        # the solved ones are validated before the next batch is solved, so planning ends
+        # with the batch whose candidate held
+        assert solved % batch == 0 or solved == planner.settings.max_proposals
+        assert result.best.rank // batch == (solved - 1) // batch
