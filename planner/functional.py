@@ -48,9 +48,9 @@ class PlannerSettings:
     palm_margin: float = 0.004  # m between the palm target and the part's near surface
     use_palm: bool = True
     # proposals solved before the best of them are validated. With the anchor-closure order the
-    # first proposals are the likeliest to hold, so short windows waste fewer solves: on the 300
+    # first proposals are the likeliest to hold, so small batches waste fewer solves: on the 300
     # test pairs 2 vs 4 gave the same returned rates, first-candidate 65/69/68% vs 70/70/68%
-    # and 0.98/1.54/1.64 s vs 1.44/2.33/2.47 s per grasp (1: 62/69/70%, 0.93/1.57/1.85 s).
+    # and 6.3/7.8/7.9 vs 7.6/8.8/9.1 solves per returned grasp (1: 62/69/70%, 5.9/7.3/7.6).
     solve_batch: int = 2
     # epsilon below this: validated only when nothing better is left. Weak force closure
     # (0.02-0.1) mostly slips and used up the validations before a later batch's strong
@@ -425,7 +425,8 @@ def finish_grasp(
     program: GraspProgram, obj: ObjectModel, solved: SolveResult, instruction: str, protocol: str
 ) -> FinishedGrasp:
     """Pregrasp (anchor fingertips about 1 cm off the surface, offsets set by balanced squeeze
-    forces: GraspProgram.pregrasp), BODex squeeze, the Grasp record, MuJoCo validation and the
+    forces and shrunk where a link would be inside the object: GraspProgram.pregrasp), BODex
+    squeeze, the Grasp record, MuJoCo validation and the
     voted part: every planned or transferred grasp goes through these same steps."""
     t1 = time.perf_counter()
     hand = program.hand

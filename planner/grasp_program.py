@@ -66,6 +66,8 @@ class ProgramSettings:
 
 
 PREGRASP_RULES = ("balanced", "normal")
+# (anchor-finger offset scale, other joints' scale), tried in order by clear_of_object
+PREGRASP_SCALES = ((1.0, 1.0), (1.0, 0.0), (0.7, 0.0), (0.5, 0.0), (0.35, 0.0), (0.25, 0.0))
 
 
 @dataclass
@@ -336,7 +338,8 @@ class GraspProgram:
         normals at the anchor fingertips, each finger's joints move by the offset that sets its
         squeeze force (`settings.pregrasp_rule`, see planner.squeeze), scaled so the fingertips
         back off `clearance` along their normals on average; the other joints move toward the
-        open pose by 0.3 of the way."""
+        open pose by 0.3 of the way. Where that puts a link inside the object the offsets
+        shrink (clear_of_object)."""
         q = np.asarray(q, dtype=float)
         if tip_normals is None:
             return self._pregrasp_toward_open(wrist, q, clearance)
@@ -375,9 +378,6 @@ class GraspProgram:
         delta[rest] = 0.3 * (self.hand.open_pose[rest] - q[rest])
         return self.clear_of_object(wrist, q, delta, moved)
 
-    # (anchor-finger offset scale, other joints' scale), tried in order by clear_of_object
-    PREGRASP_SCALES = ((1.0, 1.0), (1.0, 0.0), (0.7, 0.0), (0.5, 0.0), (0.35, 0.0), (0.25, 0.0))
-
     def clear_of_object(
         self, wrist: np.ndarray, q: np.ndarray, delta: np.ndarray, anchor_joints: np.ndarray
     ) -> np.ndarray:
@@ -393,7 +393,7 @@ class GraspProgram:
         together, which keeps the squeeze forces' balance and only weakens them."""
         bound = min(-self.settings.pregrasp_penetration, self.hand_object_distance(wrist, q))
         best, best_distance = None, -np.inf
-        for anchor_scale, rest_scale in self.PREGRASP_SCALES:
+        for anchor_scale, rest_scale in PREGRASP_SCALES:
             scaled = np.where(anchor_joints, anchor_scale, rest_scale) * delta
             pre = np.clip(q + scaled, self.hand.lower, self.hand.upper)
             distance = self.hand_object_distance(wrist, pre)

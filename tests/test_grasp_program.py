@@ -10,7 +10,7 @@ from models.errors import PlanningError
 from models.hands import load_hand
 from models.objects import make_object
 from planner.functional import FunctionalPlanner
-from planner.grasp_program import GraspTargets, ProgramSettings, grasp_program
+from planner.grasp_program import PREGRASP_SCALES, GraspTargets, ProgramSettings, grasp_program
 
 
 def _check_feasible(hand, program, result) -> None:
@@ -145,7 +145,7 @@ def test_pregrasp_offsets_shrink_until_clear_of_the_object(hand_name):
     pre = program.clear_of_object(wrist, q, inward, anchor_joints)
     bound = min(-program.settings.pregrasp_penetration, program.hand_object_distance(wrist, q))
     assert program.hand_object_distance(wrist, pre) >= bound
-    scales = [a for a, _ in program.PREGRASP_SCALES]
+    scales = [a for a, _ in PREGRASP_SCALES]
     assert any(np.allclose(pre, np.clip(q + a * inward, hand.lower, hand.upper)) for a in scales)
     assert not np.allclose(pre, np.clip(q + inward, hand.lower, hand.upper))
     # an offset that opens the hand leaves the object alone and is kept as it is
