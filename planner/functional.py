@@ -426,8 +426,8 @@ def finish_grasp(
 ) -> FinishedGrasp:
     """Pregrasp (anchor fingertips about 1 cm off the surface, offsets set by balanced squeeze
     forces and shrunk where a link would be inside the object: GraspProgram.pregrasp), BODex
-    squeeze, the Grasp record, MuJoCo validation and the
-    voted part: every planned or transferred grasp goes through these same steps."""
+    squeeze, the Grasp record, MuJoCo validation and the voted part: every planned or
+    transferred grasp goes through these same steps."""
     t1 = time.perf_counter()
     hand = program.hand
     wrist_t = torch.tensor(solved.wrist[None])

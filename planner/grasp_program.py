@@ -392,10 +392,16 @@ class GraspProgram:
         other joints are kept at the grasp first, then the anchor offsets are scaled down
         together, which keeps the squeeze forces' balance and only weakens them."""
         bound = min(-self.settings.pregrasp_penetration, self.hand_object_distance(wrist, q))
-        best, best_distance = None, -np.inf
+        best, best_distance, tried = None, -np.inf, None
         for anchor_scale, rest_scale in PREGRASP_SCALES:
-            scaled = np.where(anchor_joints, anchor_scale, rest_scale) * delta
-            pre = np.clip(q + scaled, self.hand.lower, self.hand.upper)
+            pre = np.clip(
+                q + np.where(anchor_joints, anchor_scale, rest_scale) * delta,
+                self.hand.lower,
+                self.hand.upper,
+            )
+            if tried is not None and np.array_equal(pre, tried):
+                continue  # e.g. no joints outside the anchor fingers (Allegro, LEAP)
+            tried = pre
             distance = self.hand_object_distance(wrist, pre)
             if distance >= bound:
                 return pre
