@@ -138,6 +138,10 @@ class PlanResult:
 
     @property
     def best(self) -> CandidateResult | None:
+        """The candidate whose grasp is returned; None when no grasp is (unvalidated
+        candidates also have no grasp, so they must not match)."""
+        if self.grasp is None:
+            return None
         return next((c for c in self.candidates if c.grasp is self.grasp), None)
 
     @property

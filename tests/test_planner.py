@@ -246,3 +246,14 @@ def test_proposals_are_solved_a_batch_at_a_time():
         # with the batch whose candidate held
         assert solved % batch == 0 or solved == planner.settings.max_proposals
         assert result.best.rank // batch == (solved - 1) // batch
+
+
+def test_a_plan_without_a_grasp_chooses_no_candidate():
+    # LEAP's first validated proposal on this mug's handle slips; the second is solved only
+    settings = PlannerSettings(max_proposals=2, max_candidates=1)
+    result = FunctionalPlanner("leap", settings).plan(make_object("mug", 3), "Use a mug by handle")
+    assert result.grasp is None and not result.success
+    assert any(c.grasp is None and c.order is None for c in result.candidates)
+    summary = result.summary()
+    assert result.best is None and summary["chosen_rank"] is None
+    assert summary["anchor_error_mm"] is None and summary["part_touched"] is None

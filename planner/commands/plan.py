@@ -53,9 +53,14 @@ def print_summary(result: PlanResult) -> None:
     print(f"  part touched: {s['part_touched']} (instructed: {s['part_instructed']})")
     if s["anchor_error_mm"] is not None:
         print(f"  anchor error: {s['anchor_error_mm']:.1f} mm")
+    chosen = (
+        "none chosen"
+        if s["chosen_rank"] is None
+        else f"chosen: proposal {s['chosen_rank']}, validated as #{s['chosen_validated_as']}"
+    )
     print(
         f"  candidates: {s['candidates_solved']} solved, {s['candidates_validated']} validated; "
-        f"chosen: proposal {s['chosen_rank']}, validated as #{s['chosen_validated_as']}"
+        f"{chosen}"
     )
     times = ", ".join(f"{k} {v:.2f} s" for k, v in s["times_s"].items())
     print(f"  time per stage: {times}")
