@@ -14,8 +14,13 @@ from planner.grasp_program import PREGRASP_SCALES, GraspTargets, ProgramSettings
 
 
 def _check_feasible(hand, program, result) -> None:
+    """Joints within limits and the distance re-checked; an accepted answer does not penetrate
+    beyond the bound, and a rejected one says why."""
     settings = program.settings
-    assert result.min_distance >= settings.min_distance - settings.penetration_tolerance
+    if result.ok:
+        assert result.min_distance >= settings.min_distance - settings.penetration_tolerance
+    else:
+        assert result.message
     assert np.all(result.q >= hand.lower - 1e-9) and np.all(result.q <= hand.upper + 1e-9)
     # checked independently of the solver's own report
     assert program.hand_object_distance(result.wrist, result.q) == pytest.approx(
@@ -31,6 +36,7 @@ def test_box_solve_has_no_penetration_and_respects_limits(hand_name):
     obj = make_object("bottle", 1)  # any labelled object gives a proposal; re-aim it at the box
     proposal = planner.propose(obj, "body")[0]
     result = program.solve(GraspTargets(proposal.wrist, proposal.q))
+    assert result.ok, result.message
     _check_feasible(hand, program, result)
 
 
@@ -46,6 +52,34 @@ def test_mug_handle_solve_reaches_anchors_without_penetration(hand_name):
     for r in results:
         _check_feasible(hand, program, r)
     assert any(r.ok for r in results), [r.message for r in results]
+
+
+def test_hand_hand_pairs_are_a_constraint_of_their_own(hand_name):
+    """The main context sees only hand-object pairs, the second only hand-hand pairs, and the
+    answers keep the fingers out of each other as well as out of the object."""
+    hand = load_hand(hand_name)
+    obj = make_object("mug", 3)
+    program = grasp_program(hand, obj.collision_pieces())
+    hand_geoms = program._hand_geoms
+    for context, want_hand_hand in ((program.plant_context, False), (program._self_context, True)):
+        query = program.plant.get_geometry_query_input_port().Eval(context)
+        pairs = query.ComputeSignedDistancePairwiseClosestPoints(1.0)
+        kinds = {(p.id_A in hand_geoms) and (p.id_B in hand_geoms) for p in pairs}
+        assert kinds == {want_hand_hand}
+    bound = program.settings.min_distance - program.settings.penetration_tolerance
+    solved = [
+        program.solve(GraspTargets(p.wrist, p.q, p.anchors, p.normals, palm_target=p.palm_target))
+        for p in FunctionalPlanner(hand).propose(obj, "handle")[:3]
+    ]
+    assert any(r.ok for r in solved)
+    for r in solved:
+        if r.ok:
+            assert program.hand_hand_distance(r.wrist, r.q) >= bound
+    shared = grasp_program(hand, obj.collision_pieces(), ProgramSettings(separate_hand_hand=False))
+    r = solved[0]
+    assert shared.hand_hand_distance(r.wrist, r.q) == pytest.approx(
+        program.hand_hand_distance(r.wrist, r.q), abs=1e-9
+    )
 
 
 def test_unreachable_anchors_fail_clearly():
