@@ -257,3 +257,27 @@ def test_a_plan_without_a_grasp_chooses_no_candidate():
     summary = result.summary()
     assert result.best is None and summary["chosen_rank"] is None
     assert summary["anchor_error_mm"] is None and summary["part_touched"] is None
+
+
+def test_weak_candidates_wait_only_for_the_first_solves(monkeypatch):
+    """Candidates below min_quality wait for `gate_solves` solves, not for every proposal."""
+    from planner.functional import CandidateResult
+    from planner.grasp_program import SolveResult
+
+    def fake_solve(self, program, obj, rank, proposal):
+        solved = SolveResult(proposal.wrist, proposal.q, True, 0.001, 0.0, True, "fake", 0.0)
+        # all weak, best task metric first, so the validation order is the rank order
+        return CandidateResult(rank, proposal, solved, quality=0.05, task_quality=1 - rank / 100)
+
+    def fake_validate(self, program, obj, instruction, cand):
+        cand.grasp, cand.success, cand.part = object(), cand.rank == 3, instruction.part
+
+    monkeypatch.setattr(FunctionalPlanner, "_solve", fake_solve)
+    monkeypatch.setattr(FunctionalPlanner, "_validate", fake_validate)
+    obj = make_object("bottle", 1)
+    for gate, solves in ((6, 6), (4, 4), (99, 16)):
+        settings = PlannerSettings(gate_solves=gate, solve_batch=2, max_proposals=16)
+        result = FunctionalPlanner("allegro", settings).plan(obj, "Hold a bottle by body")
+        assert result.success and result.best.rank == 3
+        assert len(result.candidates) == solves
+        assert [c.rank for c in result.candidates if c.order is not None] == [0, 1, 2, 3]
