@@ -47,7 +47,8 @@ class ProgramSettings:
     wrist_position_weight: float = 1.0
     wrist_rotation_weight: float = 0.01
     joint_prior_weight: float = 1e-4
-    min_distance: float = 0.0005  # hand-object signed distance lower bound (m): about touching
+    # hand-object and hand-hand signed distance lower bound (m): about touching
+    min_distance: float = 0.0005
     influence_distance: float = 0.01
     # Hand-object and hand-hand signed distances as two constraints instead of one. Drake folds
     # every pair into one smoothed penalty, so fingers lying side by side used up the budget
@@ -193,6 +194,7 @@ class GraspProgram:
         self.scene_graph.collision_filter_manager(main).Apply(
             CollisionFilterDeclaration().ExcludeWithin(hand)
         )
+        # kept on self: the plant context below lives inside this diagram context
         self._self_diagram_context = self.diagram.CreateDefaultContext()
         other = self.scene_graph.GetMyMutableContextFromRoot(self._self_diagram_context)
         self.scene_graph.collision_filter_manager(other).Apply(
