@@ -211,14 +211,18 @@ class GraspProgram:
     def set_configuration(self, wrist: np.ndarray, q: np.ndarray) -> None:
         self.handle.set_state(self.plant, self.plant_context, _normalize_wrist(wrist), q)
 
+    def _closest_pairs(self, context, wrist: np.ndarray, q: np.ndarray, horizon: float) -> list:
+        """Signed-distance pairs within `horizon` at (wrist, q), as `context`'s filter allows."""
+        self.handle.set_state(self.plant, context, _normalize_wrist(wrist), q)
+        query = self.plant.get_geometry_query_input_port().Eval(context)
+        return query.ComputeSignedDistancePairwiseClosestPoints(horizon)
+
     def hand_object_distance(
         self, wrist: np.ndarray, q: np.ndarray, fingers_only: bool = False, horizon: float = 0.1
     ) -> float:
         """Smallest signed distance between the hand (or its non-palm links) and the object."""
-        self.set_configuration(wrist, q)
-        query = self.plant.get_geometry_query_input_port().Eval(self.plant_context)
         best = horizon
-        for pair in query.ComputeSignedDistancePairwiseClosestPoints(horizon):
+        for pair in self._closest_pairs(self.plant_context, wrist, q, horizon):
             a, b = pair.id_A, pair.id_B
             hand_geom = a if a in self._hand_geoms else b
             if (a in self._hand_geoms) == (b in self._hand_geoms):
@@ -232,11 +236,9 @@ class GraspProgram:
         """Smallest signed distance between two of the hand's own links (the hand.json ignore
         pairs excluded): negative where fingers are inside each other."""
         context = self.plant_context if self._self_context is None else self._self_context
-        self.handle.set_state(self.plant, context, _normalize_wrist(wrist), q)
-        query = self.plant.get_geometry_query_input_port().Eval(context)
         distances = [
             pair.distance
-            for pair in query.ComputeSignedDistancePairwiseClosestPoints(horizon)
+            for pair in self._closest_pairs(context, wrist, q, horizon)
             if pair.id_A in self._hand_geoms and pair.id_B in self._hand_geoms
         ]
         return float(min(distances, default=horizon))
@@ -246,10 +248,8 @@ class GraspProgram:
     ) -> tuple[np.ndarray, np.ndarray]:
         """Object-side points where the hand is within `threshold`, with the normals pointing
         into the object (the direction the hand can push): one per touching hand geometry."""
-        self.set_configuration(wrist, q)
-        query = self.plant.get_geometry_query_input_port().Eval(self.plant_context)
         points, normals = [], []
-        for pair in query.ComputeSignedDistancePairwiseClosestPoints(threshold):
+        for pair in self._closest_pairs(self.plant_context, wrist, q, threshold):
             a_hand, b_hand = pair.id_A in self._hand_geoms, pair.id_B in self._hand_geoms
             if a_hand == b_hand:
                 continue
