@@ -46,6 +46,10 @@ class PlannerSettings:
     protocol: str = "paper"
     approach_clearance: float = 0.06  # m from the anchors' centre to test the palm's free space
     palm_margin: float = 0.004  # m between the palm target and the part's near surface
+    # anchors keep this far (m) from the instructed part's border with other parts, or half the
+    # part's widest border distance where the part is smaller: the outermost points of a bowl's
+    # body lie just below its rim, and grasps there voted "rim" though they held
+    border_margin: float = 0.005
     use_palm: bool = True
     # proposals solved before the best of them are validated. With the anchor-closure order the
     # first proposals are the likeliest to hold, so small batches waste fewer solves: on the 300
@@ -244,6 +248,7 @@ class FunctionalPlanner:
         geo = self.geometry
         spacing = min(geo.spacing, max((t.max() - t.min()) / 3, 0.005))
         tree = cKDTree(points)
+        away = self._away_from_border(points[~mask], pts)
         # Anchors sit on the part as near the object's centre of mass as the part allows: a
         # handle held at its far end lets gravity twist a knife or pan out of the fingers.
         com = points.mean(axis=0)
@@ -257,7 +262,7 @@ class FunctionalPlanner:
                 )
                 u = rot.apply(geo.opposition)  # thumb -> fingers, in the world
                 proposals.append(
-                    self._proposal(pts, nrm, t, t_mass, centre, rot, u, v, e1, spacing, tree)
+                    self._proposal(pts, nrm, t, away, t_mass, centre, rot, u, v, e1, spacing, tree)
                 )
         # Best anchor force closure first: on 150 train pairs with every candidate validated, the
         # top quarter of proposals by anchor epsilon held 30-70% of the time (bottom quarter
@@ -270,7 +275,17 @@ class FunctionalPlanner:
             proposals.sort(key=lambda p: -p.score)
         return proposals[: self.settings.max_proposals]
 
-    def _proposal(self, pts, nrm, t, t_mass, centre, rot, u, v, e1, spacing, tree) -> Proposal:
+    def _away_from_border(self, others: np.ndarray, pts: np.ndarray) -> np.ndarray:
+        """Mask of the part's points that anchors may use: `border_margin` from every other
+        part's points (or half the largest such distance on a part narrower than that)."""
+        if len(others) == 0:
+            return np.ones(len(pts), dtype=bool)
+        border, _ = cKDTree(others).query(pts)
+        return border >= min(self.settings.border_margin, 0.5 * float(border.max()))
+
+    def _proposal(
+        self, pts, nrm, t, away, t_mass, centre, rot, u, v, e1, spacing, tree
+    ) -> Proposal:
         geo = self.geometry
         lateral_sign = np.sign(rot.apply(geo.lateral) @ e1) or 1.0
         half_width = max(0.006, 0.15 * (t.max() - t.min()))
@@ -281,9 +296,10 @@ class FunctionalPlanner:
         )
 
         def extreme(t_at: float, direction: np.ndarray) -> int:
-            near = np.abs(t - t_at) < half_width
+            gap = np.where(away, np.abs(t - t_at), np.inf)
+            near = gap < half_width
             if not near.any():
-                near = np.abs(t - t_at) <= np.abs(t - t_at).min() + 1e-9
+                near = gap <= gap.min() + 1e-9
             idx = np.flatnonzero(near)
             return int(idx[np.argmax(pts[idx] @ direction)])
 

@@ -281,3 +281,25 @@ def test_weak_candidates_wait_only_for_the_first_solves(monkeypatch):
         assert result.success and result.best.rank == 3
         assert len(result.candidates) == solves
         assert [c.rank for c in result.candidates if c.order is not None] == [0, 1, 2, 3]
+
+
+def test_anchors_keep_off_the_border_with_other_parts(hand_name):
+    from scipy.spatial import cKDTree
+
+    bowl = make_object("bowl", 6)
+    margin = PlannerSettings().border_margin
+
+    def border_distances(part: str, settings: PlannerSettings) -> np.ndarray:
+        others = cKDTree(bowl.points[bowl.point_labels != bowl.part_names.index(part)])
+        proposals = FunctionalPlanner(hand_name, settings).propose(bowl, part)
+        return np.concatenate([others.query(p.anchors)[0] for p in proposals])
+
+    # the body's outermost points lie just below the rim; without the margin anchors go there
+    assert border_distances("body", PlannerSettings(border_margin=0.0)).min() < 0.5 * margin
+    assert border_distances("body", PlannerSettings()).min() >= margin
+    # the rim is narrower than twice the margin: it still gets anchors, at half its widest
+    # border distance from the body
+    rim = bowl.point_labels == bowl.part_names.index("rim")
+    widest = cKDTree(bowl.points[~rim]).query(bowl.points[rim])[0].max()
+    assert widest < 2 * margin
+    assert border_distances("rim", PlannerSettings()).min() >= 0.5 * widest - 1e-9
