@@ -50,6 +50,11 @@ class PlannerSettings:
     # part's widest border distance where the part is smaller: the outermost points of a bowl's
     # body lie just below its rim, and grasps there voted "rim" though they held
     border_margin: float = 0.005
+    # anchors planned farther apart (thumb to the fingers' mean) than this many times the
+    # hand's half-closed thumb-finger span cannot be reached (a pan's body, 17-19 cm across):
+    # the fingers then go to the part's side nearest the palm and the thumb straight across
+    # the part from them, pinching its near edge or wall
+    span_factor: float = 1.25
     use_palm: bool = True
     # proposals solved before the best of them are validated. With the anchor-closure order the
     # first proposals are the likeliest to hold, so small batches waste fewer solves: on the 300
@@ -218,6 +223,8 @@ class HandGeometry:
         self.normal = n
         self.tip_centroid = half.mean(axis=0)
         self.spacing = float(np.mean(np.linalg.norm(np.diff(opened[1:], axis=0), axis=1)))
+        # the widest thumb-finger fingertip distance of the half-closed pose
+        self.span = float(np.max(np.linalg.norm(half[1:] - half[0], axis=1)))
 
 
 class FunctionalPlanner:
@@ -295,17 +302,25 @@ class FunctionalPlanner:
             else 0.0
         )
 
-        def extreme(t_at: float, direction: np.ndarray) -> int:
+        def extreme(t_at: float, direction: np.ndarray, toward_palm: float = 0.0) -> int:
             gap = np.where(away, np.abs(t - t_at), np.inf)
             near = gap < half_width
             if not near.any():
                 near = gap <= gap.min() + 1e-9
             idx = np.flatnonzero(near)
-            return int(idx[np.argmax(pts[idx] @ direction)])
+            return int(idx[np.argmax(pts[idx] @ direction - toward_palm * (pts[idx] @ v))])
 
-        chosen = [extreme(t_mid, -u)]
-        for k in (-1, 0, 1):
-            chosen.append(extreme(t_mid + k * lateral_sign * spacing, u))
+        def fingers(toward_palm: float = 0.0) -> list[int]:
+            offsets = [t_mid + k * lateral_sign * spacing for k in (-1, 0, 1)]
+            return [extreme(t_at, u, toward_palm) for t_at in offsets]
+
+        chosen = [extreme(t_mid, -u), *fingers()]
+        span = np.linalg.norm(pts[chosen[1:]].mean(axis=0) - pts[chosen[0]])
+        if span > self.settings.span_factor * geo.span:
+            row = fingers(toward_palm=1.0)
+            thumb = _across(pts, nrm, away, pts[row[1]], -u)
+            if thumb is not None:
+                chosen = [thumb, *row]
         anchors, normals = pts[chosen], nrm[chosen]
         radii = np.array(
             [self.hand.meta.fingertip(n).radius for n in self.hand.meta.anchor_fingers]
@@ -436,6 +451,21 @@ class FunctionalPlanner:
         cand.grasp, cand.success, cand.part = done.grasp, done.success, done.part
         cand.validation = done.validation
         cand.times.update(done.times)
+
+
+def _across(
+    pts: np.ndarray, nrm: np.ndarray, allowed: np.ndarray, origin: np.ndarray, direction: np.ndarray
+) -> int | None:
+    """The first allowed surface point facing `direction` on the ray from `origin` along it
+    (within 1 cm of the ray): where a thumb opposing a finger at `origin` presses back."""
+    d = pts - origin
+    s = d @ direction
+    off = np.linalg.norm(d - np.outer(s, direction), axis=1)
+    hit = allowed & (s > 0.002) & (off < 0.01) & (nrm @ direction > 0.3)
+    if not hit.any():
+        return None
+    idx = np.flatnonzero(hit)
+    return int(idx[np.argmin(s[idx])])
 
 
 @dataclass

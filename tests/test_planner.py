@@ -303,3 +303,19 @@ def test_anchors_keep_off_the_border_with_other_parts(hand_name):
     widest = cKDTree(bowl.points[~rim]).query(bowl.points[rim])[0].max()
     assert widest < 2 * margin
     assert border_distances("rim", PlannerSettings()).min() >= 0.5 * widest - 1e-9
+
+
+def test_anchors_the_hand_cannot_span_pinch_the_near_edge(hand_name):
+    pan = make_object("pan", 3)  # its body is 17-19 cm across
+    settings = PlannerSettings()
+    limit = settings.span_factor * FunctionalPlanner(hand_name).geometry.span
+
+    def spans(settings: PlannerSettings) -> np.ndarray:
+        proposals = FunctionalPlanner(hand_name, settings).propose(pan, "body")
+        return np.array([np.linalg.norm(p.anchors[1:].mean(0) - p.anchors[0]) for p in proposals])
+
+    # planned from the part's extremes alone, the thumb sits across the whole pan
+    assert spans(PlannerSettings(span_factor=np.inf)).min() > limit
+    # now it presses back straight across the wall or floor from the fingers, except where
+    # no surface lies across within a centimetre of the fingers
+    assert (spans(settings) <= limit).sum() >= 12
