@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import shutil
 import subprocess
@@ -83,6 +84,10 @@ def test_benchmark_records_every_candidate():
     assert all(c["pregrasp_penetration_mm"] is None for c in cands if c["validated_as"] is None)
     row = summarize([record])[0]
     assert row["returned_success"] == 1.0 and row["mean_solves_per_returned_grasp"] == len(cands)
+    # a grasp that holds elsewhere counts as returned but not as on the instructed part
+    elsewhere = dataclasses.replace(record, part_ok=False)
+    row = summarize([record, elsewhere])[0]
+    assert row["returned_success"] == 1.0 and row["returned_on_part"] == 0.5
 
 
 def test_voting_rule_majority_and_far_fingertips():
