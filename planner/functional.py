@@ -4,7 +4,9 @@ Until the learned priors exist this is how a wrist pose and anchors are proposed
 instructed part's points are analysed (principal axes), the thumb is put on one side of the
 part and the three other anchor fingers on the opposite side, spread along the part's long
 axis at the hand's own finger spacing, with the palm facing the part from every direction
-around that axis. Proposals whose anchors give the best force closure are solved first; each
+around that axis. Anchors keep off the part's border with other parts, and where the hand
+cannot span the part the thumb pinches its near edge from across. Proposals whose anchors give
+the best force closure are solved first; each
 goes through the Drake grasp program and MuJoCo validation. Solved candidates are validated
 best first (force-closure quality of their contacts), and the first grasp that holds and
 touches the instructed part is returned with every candidate's outcome.
