@@ -324,3 +324,13 @@ def test_anchors_the_hand_cannot_span_pinch_the_near_edge(hand_name):
     # now it presses back straight across the wall or floor from the fingers, except where
     # no surface lies across within a centimetre of the fingers
     assert (spans(settings) <= limit).sum() >= 12
+
+
+def test_parts_thinner_than_a_fingertip_get_no_palm_target(hand_name):
+    pen, bottle = make_object("pen", 8), make_object("bottle", 1)
+    planner = FunctionalPlanner(hand_name)
+    assert all(p.palm_target is None for p in planner.propose(pen, "barrel"))
+    # a bottle's body is wider than a fingertip
+    assert all(p.palm_target is not None for p in planner.propose(bottle, "body"))
+    with_palm = FunctionalPlanner(hand_name, PlannerSettings(palm_on_thin_parts=True))
+    assert all(p.palm_target is not None for p in with_palm.propose(pen, "barrel"))
