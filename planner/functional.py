@@ -57,12 +57,10 @@ class PlannerSettings:
     # the fingers then go to the part's side nearest the palm and the thumb straight across
     # the part from them, pinching its near edge or wall
     span_factor: float = 1.25
-    # Proposals on parts thinner than an anchor fingertip is wide (pens, knife handles) carry no
-    # palm target. Pulling the palm onto a pen kept Allegro's fingertips 2-12 mm from their
-    # targets, and a pen rolls out of a pinch that is not opposite. On the validation split
-    # with 6 objects per category, the thin parts' pairs held on the part 155 vs 146 of 179
-    # times (allegro 54 vs 43 of 68, leap 72 vs 75 of 82, shadow 29 vs 28 of 29).
-    palm_on_thin_parts: bool = False
+    # May proposals on parts thinner than an anchor fingertip (pens, knife handles) carry a palm
+    # target? None: as the hand's hand.json `palm_on_thin_parts` says (default true; false for
+    # Allegro, README "No palm target on thin parts").
+    palm_on_thin_parts: bool | None = None
     use_palm: bool = True
     # proposals solved before the best of them are validated. With the anchor-closure order the
     # first proposals are the likeliest to hold, so small batches waste fewer solves: on the 300
@@ -288,7 +286,10 @@ class FunctionalPlanner:
             proposals.sort(key=lambda p: (-p.anchor_quality, -p.score))
         else:
             proposals.sort(key=lambda p: -p.score)
-        if not self.settings.palm_on_thin_parts and self._thin(pts - centre, e2, e3):
+        palm_on_thin = self.settings.palm_on_thin_parts
+        if palm_on_thin is None:
+            palm_on_thin = self.hand.meta.palm_on_thin_parts
+        if not palm_on_thin and self._thin(pts - centre, e2, e3):
             proposals = [replace(p, palm_target=None) for p in proposals]
         return proposals[: self.settings.max_proposals]
 

@@ -326,11 +326,28 @@ def test_anchors_the_hand_cannot_span_pinch_the_near_edge(hand_name):
     assert (spans(settings) <= limit).sum() >= 12
 
 
-def test_parts_thinner_than_a_fingertip_get_no_palm_target(hand_name):
+def test_palm_on_thin_parts_follows_the_hand_file(hand_name):
     pen, bottle = make_object("pen", 8), make_object("bottle", 1)
     planner = FunctionalPlanner(hand_name)
-    assert all(p.palm_target is None for p in planner.propose(pen, "barrel"))
-    # a bottle's body is wider than a fingertip
+    allowed = planner.hand.meta.palm_on_thin_parts
+    assert all((p.palm_target is not None) == allowed for p in planner.propose(pen, "barrel"))
+    # a bottle's body is wider than a fingertip: the palm target stays
     assert all(p.palm_target is not None for p in planner.propose(bottle, "body"))
-    with_palm = FunctionalPlanner(hand_name, PlannerSettings(palm_on_thin_parts=True))
-    assert all(p.palm_target is not None for p in with_palm.propose(pen, "barrel"))
+    for setting in (True, False):  # the planner setting overrides the hand file
+        override = FunctionalPlanner(hand_name, PlannerSettings(palm_on_thin_parts=setting))
+        assert all((p.palm_target is not None) == setting for p in override.propose(pen, "barrel"))
+
+
+def test_a_hand_file_can_keep_the_palm_off_thin_parts(tmp_path):
+    import json
+
+    from models.hands import load_hand
+
+    source = load_hand("leap").folder
+    folder = tmp_path / "leap_no_palm"
+    folder.mkdir()
+    (folder / "hand.urdf").write_text((source / "hand.urdf").read_text())
+    meta = json.loads((source / "hand.json").read_text())
+    (folder / "hand.json").write_text(json.dumps({**meta, "palm_on_thin_parts": False}))
+    proposals = FunctionalPlanner(load_hand(folder)).propose(make_object("pen", 8), "barrel")
+    assert all(p.palm_target is None for p in proposals)

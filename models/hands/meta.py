@@ -70,6 +70,9 @@ class HandMeta:
     # Links whose several boxes the grasp program merges into one convex hull (a bounding,
     # so still conservative, shape): fewer collision pairs, faster solves. MuJoCo keeps the boxes.
     program_hull_links: tuple[str, ...]
+    # Whether the planner may pull the palm onto a part thinner than a fingertip (pens). Allegro's
+    # long fingers cannot then keep the thumb opposite the fingers, and the pen rolls out.
+    palm_on_thin_parts: bool
     source: str  # where the kinematics come from (for provenance and vendor checks)
 
     def fingertip(self, name: str) -> Fingertip:
@@ -145,5 +148,6 @@ def read_meta(path: Path) -> HandMeta:
         joint_armature=float(raw.get("joint_dynamics", {}).get("armature", 0.0)),
         joint_frictionloss=float(raw.get("joint_dynamics", {}).get("frictionloss", 0.0)),
         program_hull_links=tuple(raw.get("program_hull_links", ())),
+        palm_on_thin_parts=bool(raw.get("palm_on_thin_parts", True)),
         source=raw.get("source", ""),
     )
