@@ -15,7 +15,7 @@ touches the instructed part is returned with every candidate's outcome.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from functools import cached_property
 from typing import Any
 
@@ -231,6 +231,7 @@ class HandGeometry:
         self.spacing = float(np.mean(np.linalg.norm(np.diff(opened[1:], axis=0), axis=1)))
         # the widest thumb-finger fingertip distance of the half-closed pose
         self.span = float(np.max(np.linalg.norm(half[1:] - half[0], axis=1)))
+        self.tip_radii = np.array([hand.meta.fingertip(n).radius for n in names])
 
 
 class FunctionalPlanner:
@@ -262,6 +263,13 @@ class FunctionalPlanner:
         spacing = min(geo.spacing, max((t.max() - t.min()) / 3, 0.005))
         tree = cKDTree(points)
         away = self._away_from_border(points[~mask], pts)
+        palm_on_thin = self.settings.palm_on_thin_parts
+        if palm_on_thin is None:
+            palm_on_thin = self.hand.meta.palm_on_thin_parts
+        # a palm target unless the planner does without, or the part is too thin for this hand
+        with_palm = self.settings.use_palm and (
+            palm_on_thin or not self._thin(pts - centre, e2, e3)
+        )
         # Anchors sit on the part as near the object's centre of mass as the part allows: a
         # handle held at its far end lets gravity twist a knife or pan out of the fingers.
         com = points.mean(axis=0)
@@ -275,7 +283,9 @@ class FunctionalPlanner:
                 )
                 u = rot.apply(geo.opposition)  # thumb -> fingers, in the world
                 proposals.append(
-                    self._proposal(pts, nrm, t, away, t_mass, centre, rot, u, v, e1, spacing, tree)
+                    self._proposal(
+                        pts, nrm, t, away, t_mass, centre, rot, u, v, e1, spacing, tree, with_palm
+                    )
                 )
         # Best anchor force closure first: on 150 train pairs with every candidate validated, the
         # top quarter of proposals by anchor epsilon held 30-70% of the time (bottom quarter
@@ -286,19 +296,12 @@ class FunctionalPlanner:
             proposals.sort(key=lambda p: (-p.anchor_quality, -p.score))
         else:
             proposals.sort(key=lambda p: -p.score)
-        palm_on_thin = self.settings.palm_on_thin_parts
-        if palm_on_thin is None:
-            palm_on_thin = self.hand.meta.palm_on_thin_parts
-        if not palm_on_thin and self._thin(pts - centre, e2, e3):
-            proposals = [replace(p, palm_target=None) for p in proposals]
         return proposals[: self.settings.max_proposals]
 
     def _thin(self, offsets: np.ndarray, e2: np.ndarray, e3: np.ndarray) -> bool:
         """Is the part narrower across its long axis than an anchor fingertip is wide?"""
-        radius = np.mean(
-            [self.hand.meta.fingertip(n).radius for n in self.hand.meta.anchor_fingers]
-        )
-        return max(np.ptp(offsets @ e2), np.ptp(offsets @ e3)) < 2 * radius
+        width = 2 * float(np.mean(self.geometry.tip_radii))
+        return max(np.ptp(offsets @ e2), np.ptp(offsets @ e3)) < width
 
     def _away_from_border(self, others: np.ndarray, pts: np.ndarray) -> np.ndarray:
         """Mask of the part's points that anchors may use: `border_margin` from every other
@@ -309,7 +312,7 @@ class FunctionalPlanner:
         return border >= min(self.settings.border_margin, 0.5 * float(border.max()))
 
     def _proposal(
-        self, pts, nrm, t, away, t_mass, centre, rot, u, v, e1, spacing, tree
+        self, pts, nrm, t, away, t_mass, centre, rot, u, v, e1, spacing, tree, with_palm
     ) -> Proposal:
         geo = self.geometry
         lateral_sign = np.sign(rot.apply(geo.lateral) @ e1) or 1.0
@@ -340,10 +343,7 @@ class FunctionalPlanner:
             if thumb is not None:
                 chosen = [thumb, *row]
         anchors, normals = pts[chosen], nrm[chosen]
-        radii = np.array(
-            [self.hand.meta.fingertip(n).radius for n in self.hand.meta.anchor_fingers]
-        )
-        centres = anchors + normals * radii[:, None]
+        centres = anchors + normals * geo.tip_radii[:, None]
         position = centres.mean(axis=0) - rot.apply(geo.tip_centroid)
         palm = centres.mean(axis=0) - v * self.settings.approach_clearance
         clearance = min(float(tree.query(palm)[0]), 0.1)
@@ -354,7 +354,7 @@ class FunctionalPlanner:
         off_axis = (pts - mid) - np.outer((pts - mid) @ v, v)
         near_line = np.linalg.norm(off_axis, axis=1) < 0.015
         palm_target = None
-        if near_line.any():
+        if with_palm and near_line.any():
             nearest = pts[near_line][np.argmin(pts[near_line] @ v)]
             palm_target = nearest - v * self.settings.palm_margin
         score = clearance + 0.1 * outward
@@ -448,7 +448,7 @@ class FunctionalPlanner:
                 proposal.q,
                 proposal.anchors,
                 proposal.normals,
-                palm_target=proposal.palm_target if self.settings.use_palm else None,
+                palm_target=proposal.palm_target,
             )
         )
         cand = CandidateResult(rank, proposal, solved, times={"solve": solved.solve_time})

@@ -339,8 +339,6 @@ def test_palm_on_thin_parts_follows_the_hand_file(hand_name):
 
 
 def test_a_hand_file_can_keep_the_palm_off_thin_parts(tmp_path):
-    import json
-
     from models.hands import load_hand
 
     source = load_hand("leap").folder
