@@ -28,6 +28,7 @@ from models.errors import InstructionError, PlanningError
 from models.grasp import Grasp
 from models.hands import HandModel, load_hand
 from models.objects import Instruction, ObjectModel, load_object, parse_instruction
+from models.reproducible import rounded
 from planner.grasp_program import (
     GraspProgram,
     GraspTargets,
@@ -257,7 +258,7 @@ class FunctionalPlanner:
             )
         centre = pts.mean(axis=0)
         _, _, axes = np.linalg.svd(pts - centre, full_matrices=False)
-        e1, e2, e3 = axes
+        e1, e2, e3 = _canonical_axes(axes)
         t = (pts - centre) @ e1
         geo = self.geometry
         spacing = min(geo.spacing, max((t.max() - t.min()) / 3, 0.005))
@@ -276,12 +277,13 @@ class FunctionalPlanner:
         t_mass = float((com - centre) @ e1) if self.settings.mass_centred else 0.0
         proposals = []
         for theta in np.deg2rad(np.arange(0, 360, self.settings.approach_step_deg)):
-            v = np.cos(theta) * e2 + np.sin(theta) * e3  # palm -> object, across the long axis
+            # palm -> object, across the long axis
+            v = rounded(np.cos(theta) * e2 + np.sin(theta) * e3)
             for lateral_sign in (1.0, -1.0):  # finger row along +e1 or -e1
                 rot, _ = Rotation.align_vectors(
                     [v, lateral_sign * e1], [geo.normal, geo.lateral], weights=[10, 1]
                 )
-                u = rot.apply(geo.opposition)  # thumb -> fingers, in the world
+                u = rounded(rot.apply(geo.opposition))  # thumb -> fingers, in the world
                 proposals.append(
                     self._proposal(
                         pts, nrm, t, away, t_mass, centre, rot, u, v, e1, spacing, tree, with_palm
@@ -292,8 +294,8 @@ class FunctionalPlanner:
         # 5-9%), while the palm-clearance score did not predict holding (README, "Status").
         if self.settings.proposal_order == "anchors":
             for p in proposals:  # about 5 ms each (a 6-D hull of 24 cone edges)
-                p.anchor_quality = contact_quality(p.anchors, -p.normals, com).epsilon
-            proposals.sort(key=lambda p: (-p.anchor_quality, -p.score))
+                p.anchor_quality = rounded(contact_quality(p.anchors, -p.normals, com).epsilon)
+            proposals.sort(key=lambda p: (-p.anchor_quality, -p.score))  # stable: ties keep order
         else:
             proposals.sort(key=lambda p: -p.score)
         return proposals[: self.settings.max_proposals]
@@ -329,7 +331,9 @@ class FunctionalPlanner:
             if not near.any():
                 near = gap <= gap.min() + 1e-9
             idx = np.flatnonzero(near)
-            return int(idx[np.argmax(pts[idx] @ direction - toward_palm * (pts[idx] @ v))])
+            # rounded, so that points level to within a nanometre tie the same way everywhere
+            height = rounded(pts[idx] @ direction - toward_palm * (pts[idx] @ v))
+            return int(idx[np.argmax(height)])
 
         def fingers(toward_palm: float = 0.0) -> list[int]:
             offsets = [t_mid + k * lateral_sign * spacing for k in (-1, 0, 1)]
@@ -358,7 +362,14 @@ class FunctionalPlanner:
             nearest = pts[near_line][np.argmin(pts[near_line] @ v)]
             palm_target = nearest - v * self.settings.palm_margin
         score = clearance + 0.1 * outward
-        return Proposal(wrist, geo.q_half.copy(), anchors, normals, score, palm_target)
+        return Proposal(
+            rounded(wrist),
+            np.clip(rounded(geo.q_half), self.hand.lower, self.hand.upper),
+            rounded(anchors),
+            rounded(normals),
+            rounded(score),
+            None if palm_target is None else rounded(palm_target),
+        )
 
     # ---- planning -------------------------------------------------------------------------
     def plan(self, obj: ObjectModel, instruction: Instruction | str) -> PlanResult:
@@ -458,7 +469,7 @@ class FunctionalPlanner:
                 solved.wrist, solved.q, self.settings.contact_distance
             )
             quality = contact_quality(points, inward, obj.points.mean(axis=0))
-            cand.quality, cand.task_quality = quality.epsilon, quality.task
+            cand.quality, cand.task_quality = rounded(quality.epsilon), rounded(quality.task)
             cand.times["quality"] = time.perf_counter() - t0
         return cand
 
@@ -483,7 +494,14 @@ def _across(
     if not hit.any():
         return None
     idx = np.flatnonzero(hit)
-    return int(idx[np.argmin(s[idx])])
+    return int(idx[np.argmin(rounded(s[idx]))])
+
+
+def _canonical_axes(axes: np.ndarray) -> np.ndarray:
+    """Principal axes (rows) with a fixed sign, each one's largest component positive, and
+    rounded: LAPACK may return either sign, and which one depends on the CPU's kernels."""
+    signs = np.sign(axes[np.arange(len(axes)), np.argmax(np.abs(axes), axis=1)])
+    return rounded(axes * signs[:, None])
 
 
 @dataclass
@@ -510,7 +528,11 @@ def finish_grasp(
     q_t = torch.tensor(solved.q[None])
     tips = hand.fingertip_positions(wrist_t, q_t, list(hand.meta.anchor_fingers))[0].numpy()
     nearest = np.argmin(np.linalg.norm(obj.points[None] - tips[:, None], axis=2), axis=1)
-    pre = program.pregrasp(solved.wrist, solved.q, obj.normals[nearest])
+    pre = np.clip(
+        rounded(program.pregrasp(solved.wrist, solved.q, obj.normals[nearest])),
+        hand.lower,
+        hand.upper,
+    )
     grasp = Grasp(
         hand=hand.name,
         wrist_pos=solved.wrist[:3],

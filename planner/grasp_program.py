@@ -33,6 +33,7 @@ from pydrake.systems.framework import DiagramBuilder
 
 from models.errors import PlanningError
 from models.hands import HandModel
+from models.reproducible import rounded
 from planner.squeeze import balanced_forces
 from planner.validation.objects import CollisionObject, as_collision_object
 
@@ -288,22 +289,22 @@ class GraspProgram:
     def solve(self, targets: GraspTargets) -> SolveResult:
         s = self.settings
         start = time.perf_counter()
-        wrist0 = _normalize_wrist(targets.wrist)
+        wrist0 = rounded(_normalize_wrist(targets.wrist))
         q0 = np.clip(np.asarray(targets.q, dtype=float), self.hand.lower, self.hand.upper)
         self.hand.check_joints(q0, "initial joints")
         plant, world = self.plant, self.plant.world_frame()
         ik = InverseKinematics(plant, self.plant_context, with_joint_limits=True)
         prog, qvar = ik.prog(), ik.q()
-        x0 = self.handle.positions(plant, wrist0, q0)
+        x0 = rounded(self.handle.positions(plant, wrist0, q0))  # models.reproducible
         joints = self.handle.joint_position_index
         if targets.anchors is not None:
             anchors = np.asarray(targets.anchors, dtype=float)
             centres = anchors.copy()
             if targets.anchor_normals is not None:
                 normals = np.asarray(targets.anchor_normals, dtype=float)
-                normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+                normals = normals / np.linalg.norm(normals, axis=1, keepdims=True)
                 radii = np.array([t.radius for t in self.tips])[:, None]
-                centres = anchors + normals * (radii + s.min_distance)
+                centres = rounded(anchors + normals * (radii + s.min_distance))
             for tip, frame, centre in zip(self.tips, self.tip_frames, centres, strict=True):
                 ik.AddPositionCost(world, centre, frame, tip.point, s.anchor_weight * np.eye(3))
         if targets.palm_target is not None:
@@ -359,8 +360,8 @@ class GraspProgram:
         wrist = np.concatenate(
             [x[start_wrist + 4 : start_wrist + 7], x[start_wrist : start_wrist + 4]]
         )
-        wrist = _normalize_wrist(wrist)
-        q = np.clip(x[joints], self.hand.lower, self.hand.upper)
+        wrist = rounded(_normalize_wrist(wrist))
+        q = np.clip(rounded(x[joints]), self.hand.lower, self.hand.upper)
         distance = self.hand_object_distance(wrist, q)
         anchor_err = (
             0.0

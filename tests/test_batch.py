@@ -213,8 +213,9 @@ def test_real_planner_and_transfer_jobs(tmp_path):
     from planner.batch.transfer import transfer_jobs
 
     jobs = [
-        # the third proposal in anchor-closure order is the first that holds on this mug
-        Job({"category": "mug", "seed": 0}, "Hold a mug by body", "allegro", 0, max_candidates=3),
+        # up to the planner's usual 8 validations: which proposal holds first varies with the
+        # machine (models.reproducible), that one does not
+        Job({"category": "mug", "seed": 0}, "Hold a mug by body", "allegro", 0, max_candidates=8),
         Job({"category": "mug", "seed": 0}, "Hold a mug by spout", "allegro", 0, max_candidates=1),
     ]
     run_batch(jobs, tmp_path / "plan", progress=False)

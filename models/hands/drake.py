@@ -23,6 +23,7 @@ from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import CoulombFriction
 
 from models.hands.primitives import primitive_mesh
+from models.reproducible import rounded
 
 
 class DrakeHand:
@@ -69,7 +70,7 @@ class DrakeHand:
 def _box_corners(hand, link: str) -> np.ndarray:
     """Corners (N, 3) of the link's collision boxes in the link frame."""
     boxes = [g for g in hand.tree.geoms[link] if g.kind == "box"]
-    return np.concatenate([primitive_mesh(g).vertices for g in boxes])
+    return rounded(np.concatenate([primitive_mesh(g).vertices for g in boxes]))
 
 
 def _urdf_without_boxes(hand, links: tuple[str, ...]) -> str:

@@ -21,6 +21,7 @@ import trimesh
 from scipy.cluster.vq import kmeans2
 from scipy.spatial import ConvexHull, QhullError, cKDTree
 
+from ..reproducible import rounded
 from .cache import cache_dir
 
 COACD_DEFAULTS: dict[str, object] = {
@@ -40,7 +41,9 @@ def hulls(point_sets: Sequence[np.ndarray], min_volume: float = 1e-10) -> list[t
     """Convex hulls of point sets, dropping any without volume (MuJoCo rejects flat meshes)."""
     out = []
     for pts in point_sets:
-        mesh = hull_mesh(np.asarray(pts, dtype=float), min_volume=min_volume)
+        # rounded first: the hull, and every solve and simulation on it, is then the same on
+        # every machine (models.reproducible)
+        mesh = hull_mesh(rounded(pts), min_volume=min_volume)
         if mesh is not None:
             out.append(mesh)
     return out

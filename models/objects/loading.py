@@ -167,8 +167,14 @@ def _from_cloud(
 
 
 def _read_pcd(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
-    import open3d as o3d
-
+    try:
+        import open3d as o3d
+    except (ImportError, OSError) as err:  # open3d loads system libraries (libusb, libGL)
+        raise ObjectError(
+            f"reading {path.name} needs Open3D, which failed to import ({err}); install the "
+            "missing system library (Debian/Ubuntu: apt-get install libusb-1.0-0 libgl1) or "
+            "convert the cloud to .ply, .npy or .xyz"
+        ) from err
     pcd = o3d.io.read_point_cloud(str(path))
     pts = np.asarray(pcd.points)
     if len(pts) == 0:

@@ -1,0 +1,56 @@
+"""Plans do not depend on the last bits of their inputs (models.reproducible)."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from models.objects import make_object
+from models.objects.model import Samples
+from models.reproducible import DECIMALS, rounded
+from planner.functional import FunctionalPlanner
+from planner.grasp_program import GraspTargets, grasp_program
+
+
+def _jittered(values: np.ndarray, seed: int) -> np.ndarray:
+    """`values` moved by a few units in their last place, as another machine's BLAS might."""
+    rng = np.random.default_rng(seed)
+    return values * (1 + rng.integers(-4, 5, size=values.shape) * np.finfo(float).eps)
+
+
+def test_rounded_is_a_nanometre_grid():
+    x = np.array([0.1234567891234, -2.0000000004])
+    assert np.array_equal(rounded(x), np.round(x, DECIMALS))
+    assert rounded(0.1 + 2e-17) == rounded(0.1) and isinstance(rounded(0.1), float)
+    assert np.array_equal(rounded(_jittered(x, 0)), rounded(x))
+
+
+def test_proposals_ignore_last_bit_differences_in_the_object(hand_name):
+    obj = make_object("mug", 3)
+    planner = FunctionalPlanner(hand_name)
+    moved = dataclasses.replace(obj, _derived={})
+    moved._derived["surface"] = Samples(
+        _jittered(obj.points, 1), obj.normals, obj.point_labels, np.arange(len(obj.points))
+    )
+    assert not np.array_equal(moved.points, obj.points)
+    for a, b in zip(planner.propose(obj, "handle"), planner.propose(moved, "handle"), strict=True):
+        assert np.array_equal(a.wrist, b.wrist) and np.array_equal(a.anchors, b.anchors)
+        assert a.anchor_quality == b.anchor_quality
+
+
+def test_solve_ignores_last_bit_differences_in_its_targets(hand_name):
+    obj = make_object("bottle", 6)
+    planner = FunctionalPlanner(hand_name)
+    program = grasp_program(planner.hand, obj.collision_pieces(), planner.settings.program)
+    p = planner.propose(obj, "body")[0]
+    exact = GraspTargets(p.wrist, p.q, p.anchors, p.normals, palm_target=p.palm_target)
+    jittered = GraspTargets(
+        _jittered(p.wrist, 2),
+        p.q,
+        _jittered(p.anchors, 3),
+        _jittered(p.normals, 4),
+        palm_target=p.palm_target,
+    )
+    a, b = program.solve(exact), program.solve(jittered)
+    assert np.array_equal(a.wrist, b.wrist) and np.array_equal(a.q, b.q)
