@@ -290,15 +290,16 @@ class GraspProgram:
         s = self.settings
         start = time.perf_counter()
         wrist0 = rounded(_normalize_wrist(targets.wrist))
-        q0 = np.clip(np.asarray(targets.q, dtype=float), self.hand.lower, self.hand.upper)
+        # every input rounded (models.reproducible), whoever built the targets
+        q0 = np.clip(rounded(targets.q), self.hand.lower, self.hand.upper)
         self.hand.check_joints(q0, "initial joints")
         plant, world = self.plant, self.plant.world_frame()
         ik = InverseKinematics(plant, self.plant_context, with_joint_limits=True)
         prog, qvar = ik.prog(), ik.q()
-        x0 = rounded(self.handle.positions(plant, wrist0, q0))  # models.reproducible
+        x0 = rounded(self.handle.positions(plant, wrist0, q0))
         joints = self.handle.joint_position_index
         if targets.anchors is not None:
-            anchors = np.asarray(targets.anchors, dtype=float)
+            anchors = rounded(targets.anchors)
             centres = anchors.copy()
             if targets.anchor_normals is not None:
                 normals = np.asarray(targets.anchor_normals, dtype=float)
@@ -310,13 +311,13 @@ class GraspProgram:
         if targets.palm_target is not None:
             ik.AddPositionCost(
                 world,
-                np.asarray(targets.palm_target, dtype=float),
+                rounded(targets.palm_target),
                 self.root_frame,
                 self.hand.meta.palm.center,
                 s.palm_weight * np.eye(3),
             )
         if targets.point_targets is not None:
-            for i, target in zip(targets.point_index, targets.point_targets, strict=True):
+            for i, target in zip(targets.point_index, rounded(targets.point_targets), strict=True):
                 ik.AddPositionCost(
                     world,
                     target,
