@@ -28,3 +28,9 @@ def rounded(values):
     if np.isscalar(values):
         return float(np.round(float(values), DECIMALS))
     return np.round(np.asarray(values, dtype=float), DECIMALS)
+
+
+def rounded_within(values, lower, upper) -> np.ndarray:
+    """Joint values rounded, then clipped: a limit with more decimals than DECIMALS stays the
+    limit instead of rounding past it."""
+    return np.clip(rounded(values), lower, upper)

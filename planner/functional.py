@@ -28,7 +28,7 @@ from models.errors import InstructionError, PlanningError
 from models.grasp import Grasp
 from models.hands import HandModel, load_hand
 from models.objects import Instruction, ObjectModel, load_object, parse_instruction
-from models.reproducible import rounded
+from models.reproducible import rounded, rounded_within
 from planner.grasp_program import (
     GraspProgram,
     GraspTargets,
@@ -213,7 +213,7 @@ class HandGeometry:
         self.hand = hand
         closing = hand.closing_direction
         span = hand.upper - hand.lower
-        self.q_half = np.clip(hand.open_pose + 0.35 * closing * span, hand.lower, hand.upper)
+        self.q_half = rounded_within(hand.open_pose + 0.35 * closing * span, hand.lower, hand.upper)
         names = list(hand.meta.anchor_fingers)
         identity = torch.tensor([[0, 0, 0, 1.0, 0, 0, 0]], dtype=torch.float64)
         half = hand.fingertip_positions(identity, torch.tensor(self.q_half[None]), names)[0].numpy()
@@ -362,9 +362,10 @@ class FunctionalPlanner:
             nearest = pts[near_line][np.argmin(pts[near_line] @ v)]
             palm_target = nearest - v * self.settings.palm_margin
         score = clearance + 0.1 * outward
+        # rounded: proposals are the same on every machine (models.reproducible)
         return Proposal(
             rounded(wrist),
-            np.clip(rounded(geo.q_half), self.hand.lower, self.hand.upper),
+            geo.q_half.copy(),  # rounded once, in HandGeometry
             rounded(anchors),
             rounded(normals),
             rounded(score),
@@ -528,11 +529,7 @@ def finish_grasp(
     q_t = torch.tensor(solved.q[None])
     tips = hand.fingertip_positions(wrist_t, q_t, list(hand.meta.anchor_fingers))[0].numpy()
     nearest = np.argmin(np.linalg.norm(obj.points[None] - tips[:, None], axis=2), axis=1)
-    pre = np.clip(
-        rounded(program.pregrasp(solved.wrist, solved.q, obj.normals[nearest])),
-        hand.lower,
-        hand.upper,
-    )
+    pre = program.pregrasp(solved.wrist, solved.q, obj.normals[nearest])
     grasp = Grasp(
         hand=hand.name,
         wrist_pos=solved.wrist[:3],

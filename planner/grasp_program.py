@@ -33,7 +33,7 @@ from pydrake.systems.framework import DiagramBuilder
 
 from models.errors import PlanningError
 from models.hands import HandModel
-from models.reproducible import rounded
+from models.reproducible import rounded, rounded_within
 from planner.squeeze import balanced_forces
 from planner.validation.objects import CollisionObject, as_collision_object
 
@@ -291,7 +291,7 @@ class GraspProgram:
         start = time.perf_counter()
         wrist0 = rounded(_normalize_wrist(targets.wrist))
         # every input rounded (models.reproducible), whoever built the targets
-        q0 = np.clip(rounded(targets.q), self.hand.lower, self.hand.upper)
+        q0 = rounded_within(targets.q, self.hand.lower, self.hand.upper)
         self.hand.check_joints(q0, "initial joints")
         plant, world = self.plant, self.plant.world_frame()
         ik = InverseKinematics(plant, self.plant_context, with_joint_limits=True)
@@ -362,7 +362,7 @@ class GraspProgram:
             [x[start_wrist + 4 : start_wrist + 7], x[start_wrist : start_wrist + 4]]
         )
         wrist = rounded(_normalize_wrist(wrist))
-        q = np.clip(rounded(x[joints]), self.hand.lower, self.hand.upper)
+        q = rounded_within(x[joints], self.hand.lower, self.hand.upper)
         distance = self.hand_object_distance(wrist, q)
         anchor_err = (
             0.0
@@ -403,7 +403,15 @@ class GraspProgram:
         shrink (clear_of_object)."""
         q = np.asarray(q, dtype=float)
         if tip_normals is None:
-            return self._pregrasp_toward_open(wrist, q, clearance)
+            pre = self._pregrasp_toward_open(wrist, q, clearance)
+        else:
+            pre = self._balanced_or_normal_pregrasp(wrist, q, np.asarray(tip_normals), clearance)
+        return rounded_within(pre, self.hand.lower, self.hand.upper)  # models.reproducible
+
+    def _balanced_or_normal_pregrasp(
+        self, wrist: np.ndarray, q: np.ndarray, tip_normals: np.ndarray, clearance: float
+    ) -> np.ndarray:
+        """The pregrasp from the fingertips' normals, by `settings.pregrasp_rule`."""
         centres = self.tip_centres(wrist, q)  # also sets the configuration
         plant, world = self.plant, self.plant.world_frame()
         joints = self.handle.joint_velocity_index

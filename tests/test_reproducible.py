@@ -8,7 +8,7 @@ import numpy as np
 
 from models.objects import make_object
 from models.objects.model import Samples
-from models.reproducible import DECIMALS, rounded
+from models.reproducible import DECIMALS, rounded, rounded_within
 from planner.functional import FunctionalPlanner
 from planner.grasp_program import GraspTargets, grasp_program
 
@@ -21,9 +21,13 @@ def _jittered(values: np.ndarray, seed: int) -> np.ndarray:
 
 def test_rounded_is_a_nanometre_grid():
     x = np.array([0.1234567891234, -2.0000000004])
-    assert np.array_equal(rounded(x), np.round(x, DECIMALS))
+    assert np.all(np.abs(rounded(x) - x) <= 0.5 * 10.0**-DECIMALS)
+    assert rounded(x)[1] == -2.0  # 0.4 nm off the grid lands on it
     assert rounded(0.1 + 2e-17) == rounded(0.1) and isinstance(rounded(0.1), float)
     assert np.array_equal(rounded(_jittered(x, 0)), rounded(x))
+    # joint values stay within limits that have more decimals than the grid
+    limit = np.pi / 2
+    assert rounded_within([limit], -limit, limit)[0] == limit and rounded([limit])[0] > limit
 
 
 def test_proposals_ignore_last_bit_differences_in_the_object(hand_name):
