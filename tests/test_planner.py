@@ -165,9 +165,11 @@ def test_viewer_page_renders_in_headless_chromium(tmp_path):
     result = plan_grasp(obj, "Hold a mug by body", "allegro")
     page = write_html(result.grasp, obj, load_hand("allegro"), tmp_path / "g.html")
     shot = tmp_path / "shot.png"
-    # Chromium sometimes writes the screenshot and then fails to exit: wait for the file, not
-    # for the process, and try a second time if neither comes within the deadline.
-    for attempt in range(2):
+    # Chromium sometimes writes the screenshot and then fails to exit, and under a loaded CI
+    # run it has exited without one: wait for the file, not for the process, try up to three
+    # times, and keep its messages for the failure report.
+    log = tmp_path / "chromium.log"
+    for attempt in range(3):
         proc = subprocess.Popen(
             [
                 CHROMIUM,
@@ -178,6 +180,7 @@ def test_viewer_page_renders_in_headless_chromium(tmp_path):
                 "--disable-background-networking",
                 "--disable-component-update",
                 "--disable-sync",
+                "--disable-dev-shm-usage",
                 f"--user-data-dir={tmp_path / f'profile{attempt}'}",
                 "--window-size=800,600",
                 "--virtual-time-budget=4000",
@@ -185,7 +188,7 @@ def test_viewer_page_renders_in_headless_chromium(tmp_path):
                 page.as_uri(),
             ],
             stdout=subprocess.DEVNULL,
-            stderr=subprocess.DEVNULL,
+            stderr=log.open("a"),
         )
         deadline = time.monotonic() + 90
         while time.monotonic() < deadline and proc.poll() is None and not shot.exists():
@@ -195,7 +198,9 @@ def test_viewer_page_renders_in_headless_chromium(tmp_path):
         proc.wait()
         if shot.exists() and shot.stat().st_size > 0:
             break
-    assert shot.exists(), "headless Chromium wrote no screenshot in two tries"
+    assert shot.exists(), "headless Chromium wrote no screenshot in three tries:\n" + "\n".join(
+        log.read_text(errors="replace").splitlines()[-15:]
+    )
     pixels = np.asarray(Image.open(shot).convert("RGB"), dtype=float)
     # a blank page is one flat colour; the scene has a background gradient, the dark hand and
     # the coloured object parts
