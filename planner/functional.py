@@ -79,6 +79,13 @@ class PlannerSettings:
     # returned success 85/95/95% vs 86/93/93% with 4.1/5.1/4.0 vs 6.7/7.9/7.2 solves per
     # returned grasp (README, "Gate on the first solves").
     gate_solves: int = 6
+    # After this many validations without a grasp that holds on the part, every remaining
+    # proposal is solved before the next validation, so the rest of the `max_candidates` go to
+    # the best of all of them (task metric) instead of to whichever batch comes next. Replayed
+    # on all-validated records of the validation split, 2-6 all gave 90/95/99% vs 87/93/95%
+    # held on the part, with 0.5-0.9 more solves per returned grasp (README, "Sweep").
+    # None: batch by batch to the end.
+    sweep_after: int | None = 4
     contact_distance: float = 0.006  # m: hand geometry this close to the object counts as contact
     # Validate every candidate within max_candidates instead of stopping at the first grasp that
     # holds on the part: solves are already paid for, so each extra validation is the cheapest
@@ -397,6 +404,8 @@ class FunctionalPlanner:
         # first by force-closure quality, so good grasps are found without solving them all.
         # Candidates without force closure (epsilon below `min_quality`) rarely hold: they wait
         # until `gate_solves` proposals are solved, then queue with the rest by task metric.
+        # After `sweep_after` validations without a grasp on the part, the remaining proposals
+        # are solved at once and the remaining validations go to the best of them.
         candidates: list[CandidateResult] = []
         deferred: list[CandidateResult] = []
         found: list[CandidateResult | None] = [None, None]  # [instructed part, any part]
@@ -419,15 +428,17 @@ class FunctionalPlanner:
                     found[1] = cand
             return False
 
-        for first in range(0, len(proposals), batch):
-            if position >= self.settings.max_candidates:
-                break
+        sweep = self.settings.sweep_after
+        first = 0
+        while first < len(proposals) and position < self.settings.max_candidates:
+            size = batch if sweep is None or position < sweep else len(proposals) - first
             solved = [
                 self._solve(program, obj, first + i, p)
-                for i, p in enumerate(proposals[first : first + batch])
+                for i, p in enumerate(proposals[first : first + size])
             ]
             if first == 0:
                 solved[0].times.update(build=build, propose=propose_time)
+            first += size
             candidates.extend(solved)
             good = [c for c in solved if c.solve.ok and c.quality >= self.settings.min_quality]
             deferred += [c for c in solved if c.solve.ok and c.quality < self.settings.min_quality]

@@ -293,6 +293,37 @@ def test_weak_candidates_wait_only_for_the_first_solves(monkeypatch):
         assert [c.rank for c in result.candidates if c.order is not None] == [0, 1, 2, 3]
 
 
+def test_after_failed_validations_the_rest_are_solved_and_the_best_validated(monkeypatch):
+    """After `sweep_after` failed validations every remaining proposal is solved, and the
+    remaining validations go to the best task metric of all of them, not to the next batch."""
+    from planner.functional import CandidateResult
+    from planner.grasp_program import SolveResult
+
+    def fake_solve(self, program, obj, rank, proposal):
+        solved = SolveResult(proposal.wrist, proposal.q, True, 0.001, 0.0, True, "fake", 0.0)
+        # strong closure everywhere; the later proposals have the better task metric
+        return CandidateResult(rank, proposal, solved, quality=0.5, task_quality=rank / 100)
+
+    def fake_validate(self, program, obj, instruction, cand):
+        cand.grasp, cand.success, cand.part = object(), cand.rank == 12, instruction.part
+
+    monkeypatch.setattr(FunctionalPlanner, "_solve", fake_solve)
+    monkeypatch.setattr(FunctionalPlanner, "_validate", fake_validate)
+    obj = make_object("bottle", 1)
+    base = {"solve_batch": 2, "max_proposals": 16, "max_candidates": 8}
+    result = FunctionalPlanner("allegro", PlannerSettings(sweep_after=4, **base)).plan(
+        obj, "Hold a bottle by body"
+    )
+    validated = sorted((c for c in result.candidates if c.order is not None), key=lambda c: c.order)
+    assert [c.rank for c in validated] == [1, 0, 3, 2, 15, 14, 13, 12]
+    assert result.success and result.best.rank == 12 and len(result.candidates) == 16
+    # batch by batch, the 8 validations end at proposal 7 and nothing holds
+    result = FunctionalPlanner("allegro", PlannerSettings(sweep_after=None, **base)).plan(
+        obj, "Hold a bottle by body"
+    )
+    assert not result.success and len(result.candidates) == 8
+
+
 def test_anchors_keep_off_the_border_with_other_parts(hand_name):
     from scipy.spatial import cKDTree
 
