@@ -38,6 +38,7 @@ from planner.grasp_program import (
 )
 from planner.labels import voted_part
 from planner.quality import contact_quality
+from planner.schedule import run_schedule
 from planner.validation import validate
 
 
@@ -400,68 +401,30 @@ class FunctionalPlanner:
         build = time.perf_counter() - start
         proposals = self.propose(obj, part)
         propose_time = time.perf_counter() - start - build
-        # Solve proposals a batch at a time and validate each batch's solved candidates best
-        # first by force-closure quality, so good grasps are found without solving them all.
-        # Candidates without force closure (epsilon below `min_quality`) rarely hold: they wait
-        # until `gate_solves` proposals are solved, then queue with the rest by task metric.
-        # After `sweep_after` validations without a grasp on the part, the remaining proposals
-        # are solved at once and the remaining validations go to the best of them.
-        candidates: list[CandidateResult] = []
-        deferred: list[CandidateResult] = []
-        found: list[CandidateResult | None] = [None, None]  # [instructed part, any part]
-        position = 0
-        batch = self.settings.solve_batch
+        # Solved a batch at a time, each batch validated best first (planner.schedule), so that
+        # good grasps are found without solving every proposal.
 
-        def try_in_order(cands: list[CandidateResult]) -> bool:
-            nonlocal position
-            for cand in sorted(cands, key=self._order_key):
-                if position >= self.settings.max_candidates:
-                    return False
-                cand.order = position
-                position += 1
-                self._validate(program, obj, instruction, cand)
-                if cand.success and cand.part == part and found[0] is None:
-                    found[0] = cand
-                    if not self.settings.validate_all:
-                        return True
-                if cand.success and found[1] is None:
-                    found[1] = cand
-            return False
+        def solve(rank: int) -> CandidateResult:
+            cand = self._solve(program, obj, rank, proposals[rank])
+            if rank == 0:
+                cand.times.update(build=build, propose=propose_time)
+            return cand
 
-        sweep = self.settings.sweep_after
-        first = 0
-        while first < len(proposals) and position < self.settings.max_candidates:
-            size = batch if sweep is None or position < sweep else len(proposals) - first
-            solved = [
-                self._solve(program, obj, first + i, p)
-                for i, p in enumerate(proposals[first : first + size])
-            ]
-            if first == 0:
-                solved[0].times.update(build=build, propose=propose_time)
-            first += size
-            candidates.extend(solved)
-            good = [c for c in solved if c.solve.ok and c.quality >= self.settings.min_quality]
-            deferred += [c for c in solved if c.solve.ok and c.quality < self.settings.min_quality]
-            if len(candidates) >= self.settings.gate_solves:
-                good, deferred = good + deferred, []
-            if try_in_order(good):
-                break
-        if found[0] is None and found[1] is None:
-            try_in_order(deferred)
-        if found[0] is not None:
-            return PlanResult(instruction, self.hand.name, found[0].grasp, candidates, notes)
-        fallback = found[1]
+        def validate(cand: CandidateResult) -> None:
+            self._validate(program, obj, instruction, cand)
+
+        scheduled = run_schedule(len(proposals), solve, validate, part, self.settings)
+        candidates = scheduled.candidates
+        if scheduled.found is not None:
+            grasp = scheduled.found.grasp
+            return PlanResult(instruction, self.hand.name, grasp, candidates, notes)
+        fallback = scheduled.fallback
         if fallback is not None:
             notes.append(
                 f"no holding grasp touched the {part}; returning one that touches {fallback.part}"
             )
             return PlanResult(instruction, self.hand.name, fallback.grasp, candidates, notes)
         return PlanResult(instruction, self.hand.name, None, candidates, notes)
-
-    def _order_key(self, cand: CandidateResult) -> tuple[float, int]:
-        """Validation order within a batch: best quality first, then proposal rank."""
-        quality = cand.task_quality if self.settings.ranking == "task" else cand.quality
-        return (-quality, cand.rank)
 
     def _solve(self, program, obj, rank, proposal) -> CandidateResult:
         """Solve one proposal and score its contacts (epsilon and task quality at the grasp)."""

@@ -1,0 +1,193 @@
+"""Replay the planner's solve and validation policy on recorded outcomes, without solving again.
+
+A candidate's solve and verdict do not depend on the order in which the planner reaches them,
+so on benchmark records in which every proposal was solved and every solved candidate validated
+(`eval.planner_benchmark --candidates 16 --set validate_all=True --out RECORDS.jsonl`), running
+the policy of `planner.schedule` with other settings gives what planning with them would give.
+Times per grasp are the recorded stage times of the solves and validations the policy uses.
+
+    python -m eval.replay RECORDS.jsonl [--candidates 8] [--set sweep_after=null gate_solves=8]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from dataclasses import fields
+from pathlib import Path
+
+import numpy as np
+
+from eval.planner_benchmark import (
+    PairRecord,
+    planner_settings,
+    print_by_part,
+    print_table,
+    summarize,
+)
+from models.errors import DrograspError
+from planner.functional import CandidateResult, PlannerSettings, Proposal
+from planner.grasp_program import SolveResult
+from planner.schedule import run_schedule
+
+# settings that only decide which recorded solves and verdicts are used; the others change the
+# proposals or the solves and need eval.planner_benchmark
+REPLAYABLE = (
+    "solve_batch",
+    "min_quality",
+    "gate_solves",
+    "sweep_after",
+    "ranking",
+    "max_proposals",
+)
+
+
+class RecordsError(DrograspError):
+    """Records that cannot be replayed (not every solved candidate validated, or too few)."""
+
+
+def load_records(path: Path) -> list[PairRecord]:
+    names = {f.name for f in fields(PairRecord)}
+    try:
+        rows = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+    except (OSError, json.JSONDecodeError) as err:
+        raise RecordsError(f"cannot read benchmark records from {path}: {err}") from err
+    return [PairRecord(**{k: v for k, v in row.items() if k in names}) for row in rows]
+
+
+def _candidate(summary: dict) -> CandidateResult:
+    """A recorded candidate with what the policy reads: solved, qualities, verdict, part."""
+    empty = np.zeros(0)
+    solve = SolveResult(
+        empty,
+        empty,
+        bool(summary["solved"]),
+        0.0,
+        0.0,
+        False,
+        "recorded",
+        summary["times"]["solve"],
+    )
+    proposal = Proposal(np.zeros(7), empty, np.zeros((4, 3)), np.zeros((4, 3)), 0.0)
+    return CandidateResult(
+        summary["rank"],
+        proposal,
+        solve,
+        quality=summary["quality"],
+        task_quality=summary["task_quality"],
+        times=dict(summary["times"]),
+    )
+
+
+def replay_pair(record: PairRecord, settings: PlannerSettings) -> PairRecord:
+    """The record as the planner with `settings` would have produced it."""
+    recorded = sorted(record.candidate_summaries, key=lambda c: c["rank"])
+    count = min(settings.max_proposals, len(recorded))
+    if len(recorded) < settings.max_proposals:
+        raise RecordsError(
+            f"{record.hand} {record.category} {record.seed}: {len(recorded)} proposals recorded, "
+            f"max_proposals={settings.max_proposals} asked"
+        )
+    unvalidated = [c["rank"] for c in recorded if c["solved"] and c["validated_as"] is None]
+    if unvalidated:
+        raise RecordsError(
+            f"{record.hand} {record.category} {record.seed}: solved candidates {unvalidated} were "
+            "not validated; record with --candidates 16 --set validate_all=True"
+        )
+    verdicts = {c["rank"]: (bool(c["success"]), c["part"]) for c in recorded}
+
+    def validate(cand: CandidateResult) -> None:
+        cand.success, cand.part = verdicts[cand.rank]
+
+    scheduled = run_schedule(
+        count, lambda i: _candidate(recorded[i]), validate, record.part, settings
+    )
+    returned = scheduled.found or scheduled.fallback
+    first = next((c for c in scheduled.candidates if c.order == 0), None)
+    used = scheduled.candidates
+    plan_time = sum(
+        c.times.get(k, 0.0)
+        for c in used
+        for k in (
+            ("build", "propose", "solve", "quality", "pregrasp", "validate")
+            if c.order is not None
+            else ("build", "propose", "solve", "quality")
+        )
+    )
+    return PairRecord(
+        hand=record.hand,
+        category=record.category,
+        seed=record.seed,
+        instruction=record.instruction,
+        part=record.part,
+        first_holds=bool(first and first.success),
+        first_part_ok=bool(first and first.success and first.part == record.part),
+        returned_holds=returned is not None,
+        part_ok=scheduled.found is not None,
+        candidates=len(used),
+        solve_times=[c.solve.solve_time for c in used],
+        plan_time=plan_time,
+        # the recorded summaries as this policy leaves them: validated or not, in what order
+        candidate_summaries=[
+            recorded[c.rank] | {"validated_as": c.order, "success": c.success, "part": c.part}
+            for c in used
+        ],
+    )
+
+
+def any_holds(records: list[PairRecord], proposals: int) -> dict[str, float]:
+    """Per hand, the share of pairs where any of the first `proposals` holds on the part: the
+    most any validation order can return."""
+    out: dict[str, list[bool]] = {}
+    for r in records:
+        held = any(
+            c["success"] and c["part"] == r.part
+            for c in r.candidate_summaries
+            if c["rank"] < proposals
+        )
+        out.setdefault(r.hand, []).append(held)
+    return {hand: sum(v) / len(v) for hand, v in sorted(out.items())}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("records", type=Path, help="eval.planner_benchmark --out JSONL")
+    parser.add_argument("--candidates", type=int, default=8, help="validations at most")
+    parser.add_argument(
+        "--set",
+        nargs="*",
+        default=[],
+        metavar="FIELD=VALUE",
+        help=f"policy settings: {', '.join(REPLAYABLE)}",
+    )
+    parser.add_argument("--by-part", action="store_true", help="returned success per part")
+    args = parser.parse_args()
+    for item in args.set:
+        name = item.partition("=")[0].strip()
+        if name not in REPLAYABLE:
+            raise SystemExit(
+                f"--set {name}: changes proposals or solves, which records cannot replay; "
+                f"replayable: {', '.join(REPLAYABLE)}"
+            )
+    settings = planner_settings(args.candidates, args.set)
+    try:
+        records = load_records(args.records)
+        replayed = [replay_pair(r, settings) for r in records]
+    except RecordsError as err:
+        raise SystemExit(f"error: {err}") from None
+    print(
+        f"{len(records)} recorded pairs replayed, up to {args.candidates} validations"
+        + (f", settings {' '.join(args.set)}" if args.set else "")
+    )
+    print_table(summarize(replayed))
+    bound = any_holds(records, settings.max_proposals)
+    print(
+        f"any of the first {settings.max_proposals} proposals holds on the part: "
+        + ", ".join(f"{hand} {share:.1%}" for hand, share in bound.items())
+    )
+    if args.by_part:
+        print_by_part(replayed)
+
+
+if __name__ == "__main__":
+    main()

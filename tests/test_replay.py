@@ -1,0 +1,81 @@
+"""eval.replay: the planner's policy run on recorded outcomes gives the planner's own plan."""
+
+import json
+from dataclasses import asdict, replace
+
+import pytest
+
+from eval.planner_benchmark import PairRecord
+from eval.replay import RecordsError, load_records, replay_pair
+from models.objects import make_object
+from planner.functional import FunctionalPlanner, PlannerSettings
+
+TEXT = "Use a mug by handle"
+
+
+def _record(result, part: str) -> PairRecord:
+    return PairRecord(
+        hand=result.hand,
+        category="mug",
+        seed=3,
+        instruction=TEXT,
+        part=part,
+        first_holds=False,
+        first_part_ok=False,
+        returned_holds=result.success,
+        part_ok=result.success,
+        candidates=len(result.candidates),
+        solve_times=[],
+        plan_time=0.0,
+        candidate_summaries=[c.summary() for c in result.candidates],
+    )
+
+
+def test_replay_of_all_validated_records_is_the_plan(hand_name, tmp_path):
+    # a small policy, so that the sweep after failed validations is reached on mug handles
+    small = PlannerSettings(max_proposals=8, max_candidates=4, sweep_after=2, min_quality=0.15)
+    obj = make_object("mug", 3)
+    planned = FunctionalPlanner(hand_name, small).plan(obj, TEXT)
+    everything = replace(small, max_candidates=8, validate_all=True)
+    recorded = FunctionalPlanner(hand_name, everything).plan(obj, TEXT)
+    path = tmp_path / "records.jsonl"
+    path.write_text(json.dumps(asdict(_record(recorded, "handle"))) + "\n")
+    (record,) = load_records(path)
+    replayed = replay_pair(record, small)
+    assert replayed.candidates == len(planned.candidates)
+    assert replayed.returned_holds == planned.success
+    first = next((c for c in planned.candidates if c.order == 0), None)
+    assert replayed.first_holds == bool(first and first.success)
+
+    # the same candidates solved and validated, in the same order, with the same verdicts
+    def order(summaries):
+        done = sorted(
+            (c for c in summaries if c["validated_as"] is not None), key=lambda c: c["validated_as"]
+        )
+        return [(c["rank"], c["success"], c["part"]) for c in done]
+
+    assert order(replayed.candidate_summaries) == order([c.summary() for c in planned.candidates])
+    assert [c["rank"] for c in replayed.candidate_summaries] == [c.rank for c in planned.candidates]
+
+
+def test_records_without_every_verdict_are_refused(tmp_path):
+    summary = {
+        "rank": 0,
+        "solved": True,
+        "success": False,
+        "part": None,
+        "quality": 0.2,
+        "task_quality": 0.3,
+        "validated_as": None,
+        "times": {"solve": 0.1},
+    }
+    record = PairRecord("leap", "mug", 3, TEXT, "handle", False, False, False, False, 1, [], 0.0)
+    record.candidate_summaries = [summary]
+    with pytest.raises(RecordsError, match="validate_all"):
+        replay_pair(record, PlannerSettings(max_proposals=1))
+    with pytest.raises(RecordsError, match="max_proposals"):
+        replay_pair(record, PlannerSettings(max_proposals=2))
+    path = tmp_path / "broken.jsonl"
+    path.write_text("{not json\n")
+    with pytest.raises(RecordsError, match="cannot read"):
+        load_records(path)
