@@ -74,6 +74,9 @@ class ProgramSettings:
     # chosen to cancel, planner.squeeze) or "normal" (each fingertip 1 cm back along its normal)
     pregrasp_rule: str = "balanced"
     squeeze_depth: float = 1.0  # squeeze = grasp + depth x (grasp - pregrasp); 1 is BODex's rule
+    # how far (m) the anchor fingertips back off at the pregrasp, on average: the closing travel
+    # before contact, and with squeeze_depth the squeeze offset past it
+    pregrasp_clearance: float = 0.01
 
     def __post_init__(self) -> None:
         if self.pregrasp_rule not in PREGRASP_RULES:
@@ -392,9 +395,10 @@ class GraspProgram:
         wrist: np.ndarray,
         q: np.ndarray,
         tip_normals: np.ndarray | None = None,
-        clearance: float = 0.01,
+        clearance: float | None = None,
     ) -> np.ndarray:
-        """BODex's pregrasp: the grasp with contacts about `clearance` off the surface, same
+        """BODex's pregrasp: the grasp with contacts about `clearance` off the surface (default
+        `settings.pregrasp_clearance`, 1 cm), same
         wrist, so that the squeeze (2 x grasp - pregrasp) presses. With the object's outward
         normals at the anchor fingertips, each finger's joints move by the offset that sets its
         squeeze force (`settings.pregrasp_rule`, see planner.squeeze), scaled so the fingertips
@@ -402,6 +406,8 @@ class GraspProgram:
         open pose by 0.3 of the way. Where that puts a link inside the object the offsets
         shrink (clear_of_object)."""
         q = np.asarray(q, dtype=float)
+        if clearance is None:
+            clearance = self.settings.pregrasp_clearance
         if tip_normals is None:
             pre = self._pregrasp_toward_open(wrist, q, clearance)
         else:
