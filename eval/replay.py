@@ -82,11 +82,12 @@ def _candidate(summary: dict) -> CandidateResult:
 def replay_pair(record: PairRecord, settings: PlannerSettings) -> PairRecord:
     """The record as the planner with `settings` would have produced it."""
     recorded = sorted(record.candidate_summaries, key=lambda c: c["rank"])
-    count = min(settings.max_proposals, len(recorded))
-    if len(recorded) < settings.max_proposals:
+    count = settings.max_proposals
+    if len(recorded) < count:
         raise RecordsError(
             f"{record.hand} {record.category} {record.seed}: {len(recorded)} proposals recorded, "
-            f"max_proposals={settings.max_proposals} asked"
+            f"max_proposals={count} asked; record every proposal with --candidates 16 --set "
+            "validate_all=True (or replay fewer: --set max_proposals=N)"
         )
     unvalidated = [c["rank"] for c in recorded if c["solved"] and c["validated_as"] is None]
     if unvalidated:
