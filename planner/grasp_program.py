@@ -73,10 +73,13 @@ class ProgramSettings:
     # How the pregrasp backs off, which sets the squeeze forces: "balanced" (fingertip forces
     # chosen to cancel, planner.squeeze) or "normal" (each fingertip 1 cm back along its normal)
     pregrasp_rule: str = "balanced"
-    squeeze_depth: float = 1.0  # squeeze = grasp + depth x (grasp - pregrasp); 1 is BODex's rule
+    # squeeze = grasp + depth x (grasp - pregrasp); None: the hand's hand.json `squeeze_depth`
+    # (default 1, BODex's rule)
+    squeeze_depth: float | None = None
     # how far (m) the anchor fingertips back off at the pregrasp, on average: the closing travel
-    # before contact, and with squeeze_depth the squeeze offset past it
-    pregrasp_clearance: float = 0.01
+    # before contact, and with the depth the squeeze offset past it; None: the hand's hand.json
+    # `pregrasp_clearance` (default 1 cm)
+    pregrasp_clearance: float | None = None
 
     def __post_init__(self) -> None:
         if self.pregrasp_rule not in PREGRASP_RULES:
@@ -190,6 +193,18 @@ class GraspProgram:
             raise PlanningError(
                 "SNOPT is not available in this Drake build; install drake from PyPI"
             )
+
+    @property
+    def squeeze_depth(self) -> float:
+        """The settings' squeeze depth, else the hand's (hand.json)."""
+        depth = self.settings.squeeze_depth
+        return self.hand.meta.squeeze_depth if depth is None else depth
+
+    @property
+    def pregrasp_clearance(self) -> float:
+        """The settings' pregrasp clearance (m), else the hand's (hand.json)."""
+        clearance = self.settings.pregrasp_clearance
+        return self.hand.meta.pregrasp_clearance if clearance is None else clearance
 
     def _separate_hand_hand(self) -> None:
         """Filter hand-hand pairs out of the main context (its queries then see only hand-object
@@ -398,7 +413,7 @@ class GraspProgram:
         clearance: float | None = None,
     ) -> np.ndarray:
         """BODex's pregrasp: the grasp with contacts about `clearance` off the surface (default
-        `settings.pregrasp_clearance`, 1 cm), same
+        `pregrasp_clearance`), same
         wrist, so that the squeeze (2 x grasp - pregrasp) presses. With the object's outward
         normals at the anchor fingertips, each finger's joints move by the offset that sets its
         squeeze force (`settings.pregrasp_rule`, see planner.squeeze), scaled so the fingertips
@@ -407,7 +422,7 @@ class GraspProgram:
         shrink (clear_of_object)."""
         q = np.asarray(q, dtype=float)
         if clearance is None:
-            clearance = self.settings.pregrasp_clearance
+            clearance = self.pregrasp_clearance
         if tip_normals is None:
             pre = self._pregrasp_toward_open(wrist, q, clearance)
         else:
@@ -498,7 +513,7 @@ class GraspProgram:
     def squeeze(self, q: np.ndarray, pregrasp: np.ndarray) -> np.ndarray:
         """BODex's rule, squeeze = 2 x grasp - pregrasp (squeeze_depth 1), within joint limits:
         the position targets past the contacts are what make the fingers press."""
-        depth = self.settings.squeeze_depth
+        depth = self.squeeze_depth
         return np.clip((1 + depth) * q - depth * pregrasp, self.hand.lower, self.hand.upper)
 
 

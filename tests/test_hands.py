@@ -261,3 +261,18 @@ def test_program_hulls_contain_the_link_boxes_and_leave_the_open_pose_free(hand_
     query = plant.get_geometry_query_input_port().Eval(context)
     pairs = query.ComputeSignedDistancePairwiseClosestPoints(0.0)
     assert not [(p.id_A, p.id_B, p.distance) for p in pairs if p.distance < 0]
+
+
+def test_user_hand_closing_values_must_be_positive(tmp_path):
+    folder = tmp_path / "closing"
+    shutil.copytree(load_hand("leap").folder, folder)
+    meta = json.loads((folder / "hand.json").read_text())
+    assert load_hand("leap").meta.squeeze_depth == 1.0  # the default where hand.json is silent
+    for field, value in (
+        ("squeeze_depth", 0),
+        ("pregrasp_clearance", -0.01),
+        ("squeeze_depth", "2"),
+    ):
+        (folder / "hand.json").write_text(json.dumps({**meta, field: value}))
+        with pytest.raises(HandError, match=f"{field} must be a positive number"):
+            load_hand(folder)

@@ -73,6 +73,12 @@ class HandMeta:
     # Whether the planner may pull the palm onto a part thinner than a fingertip (pens). Allegro's
     # long fingers cannot then keep the thumb opposite the fingers, and the pen rolls out.
     palm_on_thin_parts: bool
+    # How the fingers close in validation: the anchor fingertips back off `pregrasp_clearance`
+    # (m, mean) at the pregrasp, and squeeze = grasp + squeeze_depth x (grasp - pregrasp).
+    # BODex's 1 cm and 1 by default; Allegro closes from 5 mm to twice that past the contact,
+    # the same squeeze target with half the travel (README, "Allegro's shorter closing").
+    pregrasp_clearance: float
+    squeeze_depth: float
     source: str  # where the kinematics come from (for provenance and vendor checks)
 
     def fingertip(self, name: str) -> Fingertip:
@@ -126,6 +132,12 @@ def read_meta(path: Path) -> HandMeta:
             raise HandError(f"{path}: {field} lacks joints {absent}")
     palm = raw["palm"]
     act = raw["actuator"]
+    closing = {}
+    for field, default in (("pregrasp_clearance", 0.01), ("squeeze_depth", 1.0)):
+        value = raw.get(field, default)
+        if not isinstance(value, (int, float)) or not np.isfinite(value) or value <= 0:
+            raise HandError(f"{path}: {field} must be a positive number, got {value!r}")
+        closing[field] = float(value)
     return HandMeta(
         name=raw["name"],
         urdf=raw["urdf"],
@@ -149,5 +161,6 @@ def read_meta(path: Path) -> HandMeta:
         joint_frictionloss=float(raw.get("joint_dynamics", {}).get("frictionloss", 0.0)),
         program_hull_links=tuple(raw.get("program_hull_links", ())),
         palm_on_thin_parts=bool(raw.get("palm_on_thin_parts", True)),
+        **closing,
         source=raw.get("source", ""),
     )
