@@ -83,8 +83,9 @@ class PlannerSettings:
     # After this many validations without a grasp that holds on the part, every remaining
     # proposal is solved before the next validation, so the rest of the `max_candidates` go to
     # the best of all of them (task metric) instead of to whichever batch comes next. Replayed
-    # on all-validated records of the validation split, 2-6 all gave 90/95/99% vs 87/93/95%
-    # held on the part, with 0.5-0.9 more solves per returned grasp (README, "Sweep").
+    # on all-validated records of the validation split, 2-6 all gave 90/95/99-100% vs 87/93/95%
+    # held on the part, with 0.6-0.9 more solves per returned grasp (README, "Sweep after failed
+    # validations").
     # None: batch by batch to the end.
     sweep_after: int | None = 4
     contact_distance: float = 0.006  # m: hand geometry this close to the object counts as contact
