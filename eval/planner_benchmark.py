@@ -15,7 +15,7 @@ import statistics
 import time
 from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 
 from tqdm import tqdm
@@ -44,6 +44,18 @@ class PairRecord:
     # every candidate's CandidateResult.summary(): features (quality, task quality, anchor
     # error, pregrasp penetration) and outcome, for fitting a validation order offline
     candidate_summaries: list[dict] = field(default_factory=list)
+
+
+def write_records(records: Sequence[PairRecord], path: Path) -> None:
+    """The `--out` file: one PairRecord per line (JSONL)."""
+    path.write_text("".join(json.dumps(asdict(r)) + "\n" for r in records))
+
+
+def read_records(path: Path) -> list[PairRecord]:
+    """Records written by `write_records` (fields added since are left at their defaults)."""
+    names = {f.name for f in fields(PairRecord)}
+    rows = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+    return [PairRecord(**{k: v for k, v in row.items() if k in names}) for row in rows]
 
 
 def pairs(split: str, per_category: int, hands: list[str]) -> list[tuple[str, str, int, str]]:
@@ -198,7 +210,7 @@ def main() -> None:
         for rec in tqdm(pool.map(run_pair, jobs, chunksize=1), total=len(jobs), unit="pair"):
             records.append(rec)
     if args.out:
-        args.out.write_text("".join(json.dumps(asdict(r)) + "\n" for r in records))
+        write_records(records, args.out)
     print(
         f"split {args.split}, {args.objects_per_category} objects per category, "
         f"up to {args.candidates} candidates, paper validation preset"

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import argparse
 import json
-from dataclasses import fields
 from pathlib import Path
 
 import numpy as np
@@ -23,6 +22,7 @@ from eval.planner_benchmark import (
     planner_settings,
     print_by_part,
     print_table,
+    read_records,
     summarize,
 )
 from models.errors import DrograspError
@@ -42,17 +42,21 @@ REPLAYABLE = (
 )
 
 
+# recorded stage times (CandidateResult.times) that a solved / a validated candidate costs
+SOLVE_STAGES = ("build", "propose", "solve", "quality")
+VALIDATE_STAGES = ("pregrasp", "validate")
+
+
 class RecordsError(DrograspError):
     """Records that cannot be replayed (not every solved candidate validated, or too few)."""
 
 
 def load_records(path: Path) -> list[PairRecord]:
-    names = {f.name for f in fields(PairRecord)}
+    """`eval.planner_benchmark --out` records, or a RecordsError saying why they cannot be read."""
     try:
-        rows = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
-    except (OSError, json.JSONDecodeError) as err:
+        return read_records(path)
+    except (OSError, json.JSONDecodeError, TypeError) as err:
         raise RecordsError(f"cannot read benchmark records from {path}: {err}") from err
-    return [PairRecord(**{k: v for k, v in row.items() if k in names}) for row in rows]
 
 
 def _candidate(summary: dict) -> CandidateResult:
@@ -107,13 +111,9 @@ def replay_pair(record: PairRecord, settings: PlannerSettings) -> PairRecord:
     first = next((c for c in scheduled.candidates if c.order == 0), None)
     used = scheduled.candidates
     plan_time = sum(
-        c.times.get(k, 0.0)
+        c.times.get(stage, 0.0)
         for c in used
-        for k in (
-            ("build", "propose", "solve", "quality", "pregrasp", "validate")
-            if c.order is not None
-            else ("build", "propose", "solve", "quality")
-        )
+        for stage in SOLVE_STAGES + (VALIDATE_STAGES if c.order is not None else ())
     )
     return PairRecord(
         hand=record.hand,
