@@ -71,7 +71,8 @@ class ProgramSettings:
     major_feasibility: float = 1e-5
     major_iterations: int = 150
     # How the pregrasp backs off, which sets the squeeze forces: "balanced" (fingertip forces
-    # chosen to cancel, planner.squeeze) or "normal" (each fingertip 1 cm back along its normal)
+    # chosen to cancel, planner.squeeze) or "normal" (each fingertip straight back along its
+    # normal), either by the pregrasp clearance
     pregrasp_rule: str = "balanced"
     # squeeze = grasp + depth x (grasp - pregrasp); None: the hand's hand.json `squeeze_depth`
     # (default 1, BODex's rule)
@@ -412,9 +413,9 @@ class GraspProgram:
         tip_normals: np.ndarray | None = None,
         clearance: float | None = None,
     ) -> np.ndarray:
-        """BODex's pregrasp: the grasp with contacts about `clearance` off the surface (default
-        `pregrasp_clearance`), same
-        wrist, so that the squeeze (2 x grasp - pregrasp) presses. With the object's outward
+        """BODex's pregrasp: the grasp with contacts about `clearance` (default: the
+        `pregrasp_clearance` property) off the surface, same wrist, so that the squeeze (grasp
+        + depth x (grasp - pregrasp)) presses. With the object's outward
         normals at the anchor fingertips, each finger's joints move by the offset that sets its
         squeeze force (`settings.pregrasp_rule`, see planner.squeeze), scaled so the fingertips
         back off `clearance` along their normals on average; the other joints move toward the
@@ -511,7 +512,7 @@ class GraspProgram:
         return open_q.copy()
 
     def squeeze(self, q: np.ndarray, pregrasp: np.ndarray) -> np.ndarray:
-        """BODex's rule, squeeze = 2 x grasp - pregrasp (squeeze_depth 1), within joint limits:
+        """squeeze = grasp + depth x (grasp - pregrasp) (BODex's rule at depth 1), within limits:
         the position targets past the contacts are what make the fingers press."""
         depth = self.squeeze_depth
         return np.clip((1 + depth) * q - depth * pregrasp, self.hand.lower, self.hand.upper)

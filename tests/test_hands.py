@@ -272,6 +272,7 @@ def test_user_hand_closing_values_must_be_positive(tmp_path):
         ("squeeze_depth", 0),
         ("pregrasp_clearance", -0.01),
         ("squeeze_depth", "2"),
+        ("pregrasp_clearance", True),
     ):
         (folder / "hand.json").write_text(json.dumps({**meta, field: value}))
         with pytest.raises(HandError, match=f"{field} must be a positive number"):

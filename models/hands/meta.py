@@ -135,7 +135,8 @@ def read_meta(path: Path) -> HandMeta:
     closing = {}
     for field, default in (("pregrasp_clearance", 0.01), ("squeeze_depth", 1.0)):
         value = raw.get(field, default)
-        if not isinstance(value, (int, float)) or not np.isfinite(value) or value <= 0:
+        number = isinstance(value, (int, float)) and not isinstance(value, bool)
+        if not number or not np.isfinite(value) or value <= 0:
             raise HandError(f"{path}: {field} must be a positive number, got {value!r}")
         closing[field] = float(value)
     return HandMeta(
