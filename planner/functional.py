@@ -81,13 +81,13 @@ class PlannerSettings:
     # returned grasp (README, "Gate on the first solves").
     gate_solves: int = 6
     # After this many validations without a grasp that holds on the part, every remaining
-    # proposal is solved before the next validation, so the rest of the `max_candidates` go to
-    # the best of all of them (task metric) instead of to whichever batch comes next. Replayed
-    # on all-validated records of the validation split, 2-6 all gave 90/95/99-100% vs 87/93/95%
-    # held on the part, with 0.6-0.9 more solves per returned grasp (README, "Sweep after failed
-    # validations").
+    # proposal is solved before the next validation (even in the middle of a batch's queue), so
+    # the rest of the `max_candidates` go to the best of all of them (task metric) instead of
+    # to whichever batch comes next. Replayed on all-validated records of the validation split,
+    # 3 gave 94/95/100% held on the part against 93/95/99% at 4 and 86/93/95% without a sweep
+    # (README, "Sweep after failed validations").
     # None: batch by batch to the end.
-    sweep_after: int | None = 4
+    sweep_after: int | None = 3
     contact_distance: float = 0.006  # m: hand geometry this close to the object counts as contact
     # Validate every candidate within max_candidates instead of stopping at the first grasp that
     # holds on the part: solves are already paid for, so each extra validation is the cheapest

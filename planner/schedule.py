@@ -37,26 +37,36 @@ def run_schedule(
     part: str,
     settings: PlannerSettings,
 ) -> Scheduled:
-    """Solve proposals 0..count-1 a batch at a time and validate each batch's solved candidates
-    best first, until one holds on `part` or `settings.max_candidates` are validated.
+    """Solve proposals 0..count-1 a batch at a time and validate the solved candidates best
+    first, until one holds on `part` or `settings.max_candidates` are validated.
 
     Candidates without force closure (epsilon below `min_quality`) rarely hold: they wait until
-    `gate_solves` proposals are solved, then queue with the rest by task metric. After
-    `sweep_after` validations without a grasp on the part, every remaining proposal is solved
-    at once and the remaining validations go to the best of them. `validate` fills the
-    candidate's `success` and `part`; `order` is set here."""
+    `gate_solves` proposals are solved, then queue with the rest by task metric. Once
+    `sweep_after` validations have failed to hold on the part, every remaining proposal is
+    solved before the next validation (even in the middle of a batch's queue), and the remaining
+    validations go to the best of all of them. `validate` fills the candidate's `success` and
+    `part`; `order` is set here."""
     s = settings
     candidates: list[CandidateResult] = []
-    deferred: list[CandidateResult] = []
+    queue: list[CandidateResult] = []  # solved, released by the gate, not yet validated
+    deferred: list[CandidateResult] = []  # solved with weak closure, held back by the gate
     found: CandidateResult | None = None
     fallback: CandidateResult | None = None
     position = 0
+    solved_count = 0
 
-    def try_in_order(cands: list[CandidateResult]) -> bool:
+    def sweeping() -> bool:
+        return s.sweep_after is not None and position >= s.sweep_after
+
+    def validate_queue() -> bool:
+        """Validate the queue best first; True once a grasp holds on the part. Returns early,
+        leaving the rest queued, when the sweep is due and proposals are left unsolved."""
         nonlocal position, found, fallback
-        for cand in sorted(cands, key=lambda c: validation_key(c, s.ranking)):
-            if position >= s.max_candidates:
+        queue.sort(key=lambda c: validation_key(c, s.ranking))
+        while queue and position < s.max_candidates:
+            if sweeping() and solved_count < count:
                 return False
+            cand = queue.pop(0)
             cand.order = position
             position += 1
             validate(cand)
@@ -68,18 +78,18 @@ def run_schedule(
                 fallback = cand
         return False
 
-    first = 0
-    while first < count and position < s.max_candidates:
-        size = s.solve_batch if s.sweep_after is None or position < s.sweep_after else count
-        solved = [solve(i) for i in range(first, min(first + size, count))]
-        first += len(solved)
+    while solved_count < count and position < s.max_candidates:
+        size = count if sweeping() else s.solve_batch
+        solved = [solve(i) for i in range(solved_count, min(solved_count + size, count))]
+        solved_count += len(solved)
         candidates.extend(solved)
-        good = [c for c in solved if c.solve.ok and c.quality >= s.min_quality]
+        queue += [c for c in solved if c.solve.ok and c.quality >= s.min_quality]
         deferred += [c for c in solved if c.solve.ok and c.quality < s.min_quality]
         if len(candidates) >= s.gate_solves:
-            good, deferred = good + deferred, []
-        if try_in_order(good):
+            queue, deferred = queue + deferred, []
+        if validate_queue():
             break
     if found is None and fallback is None:
-        try_in_order(deferred)
+        queue += deferred
+        validate_queue()
     return Scheduled(candidates, found, fallback)

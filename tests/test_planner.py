@@ -286,7 +286,10 @@ def test_weak_candidates_wait_only_for_the_first_solves(monkeypatch):
     monkeypatch.setattr(FunctionalPlanner, "_validate", fake_validate)
     obj = make_object("bottle", 1)
     for gate, solves in ((6, 6), (4, 4), (99, 16)):
-        settings = PlannerSettings(gate_solves=gate, solve_batch=2, max_proposals=16)
+        # the gate alone: no sweep after the failed validations of proposals 0-2
+        settings = PlannerSettings(
+            gate_solves=gate, solve_batch=2, max_proposals=16, sweep_after=None
+        )
         result = FunctionalPlanner("allegro", settings).plan(obj, "Hold a bottle by body")
         assert result.success and result.best.rank == 3
         assert len(result.candidates) == solves
@@ -322,6 +325,34 @@ def test_after_failed_validations_the_rest_are_solved_and_the_best_validated(mon
         obj, "Hold a bottle by body"
     )
     assert not result.success and len(result.candidates) == 8
+
+
+def test_the_sweep_does_not_wait_for_the_queue_the_gate_released(monkeypatch):
+    """The gate releases its 6 weak candidates at once; after `sweep_after` of them fail, the
+    remaining proposals are solved before the rest of that queue is validated."""
+    from planner.functional import CandidateResult
+    from planner.grasp_program import SolveResult
+
+    def fake_solve(self, program, obj, rank, proposal):
+        solved = SolveResult(proposal.wrist, proposal.q, True, 0.001, 0.0, True, "fake", 0.0)
+        # weak closure everywhere (held back by the gate); later proposals rank higher
+        return CandidateResult(rank, proposal, solved, quality=0.05, task_quality=rank / 100)
+
+    def fake_validate(self, program, obj, instruction, cand):
+        cand.grasp, cand.success, cand.part = object(), cand.rank == 12, instruction.part
+
+    monkeypatch.setattr(FunctionalPlanner, "_solve", fake_solve)
+    monkeypatch.setattr(FunctionalPlanner, "_validate", fake_validate)
+    settings = PlannerSettings(
+        solve_batch=2, max_proposals=16, max_candidates=8, gate_solves=6, sweep_after=4
+    )
+    result = FunctionalPlanner("allegro", settings).plan(
+        make_object("bottle", 1), "Hold a bottle by body"
+    )
+    validated = sorted((c for c in result.candidates if c.order is not None), key=lambda c: c.order)
+    # 5, 4, 3, 2 from the released queue, then the best of all 16 (proposals 1 and 0 wait)
+    assert [c.rank for c in validated] == [5, 4, 3, 2, 15, 14, 13, 12]
+    assert result.success and result.best.rank == 12
 
 
 def test_anchors_keep_off_the_border_with_other_parts(hand_name):
