@@ -53,7 +53,6 @@ def run_schedule(
     found: CandidateResult | None = None
     fallback: CandidateResult | None = None
     position = 0
-    solved_count = 0
 
     def sweeping() -> bool:
         return s.sweep_after is not None and position >= s.sweep_after
@@ -64,7 +63,7 @@ def run_schedule(
         nonlocal position, found, fallback
         queue.sort(key=lambda c: validation_key(c, s.ranking))
         while queue and position < s.max_candidates:
-            if sweeping() and solved_count < count:
+            if sweeping() and len(candidates) < count:
                 return False
             cand = queue.pop(0)
             cand.order = position
@@ -78,10 +77,10 @@ def run_schedule(
                 fallback = cand
         return False
 
-    while solved_count < count and position < s.max_candidates:
+    while len(candidates) < count and position < s.max_candidates:
+        first = len(candidates)
         size = count if sweeping() else s.solve_batch
-        solved = [solve(i) for i in range(solved_count, min(solved_count + size, count))]
-        solved_count += len(solved)
+        solved = [solve(i) for i in range(first, min(first + size, count))]
         candidates.extend(solved)
         queue += [c for c in solved if c.solve.ok and c.quality >= s.min_quality]
         deferred += [c for c in solved if c.solve.ok and c.quality < s.min_quality]

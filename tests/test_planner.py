@@ -269,21 +269,27 @@ def test_a_plan_without_a_grasp_chooses_no_candidate():
     assert summary["anchor_error_mm"] is None and summary["part_touched"] is None
 
 
-def test_weak_candidates_wait_only_for_the_first_solves(monkeypatch):
-    """Candidates below min_quality wait for `gate_solves` solves, not for every proposal."""
+def _fake_solves_and_verdicts(monkeypatch, quality: float, task, holder: int) -> None:
+    """Replace solving and validation: every proposal solves, with epsilon `quality` and task
+    metric `task(rank)`, and only proposal `holder` holds (on the instructed part)."""
     from planner.functional import CandidateResult
     from planner.grasp_program import SolveResult
 
     def fake_solve(self, program, obj, rank, proposal):
         solved = SolveResult(proposal.wrist, proposal.q, True, 0.001, 0.0, True, "fake", 0.0)
-        # all weak, best task metric first, so the validation order is the rank order
-        return CandidateResult(rank, proposal, solved, quality=0.05, task_quality=1 - rank / 100)
+        return CandidateResult(rank, proposal, solved, quality=quality, task_quality=task(rank))
 
     def fake_validate(self, program, obj, instruction, cand):
-        cand.grasp, cand.success, cand.part = object(), cand.rank == 3, instruction.part
+        cand.grasp, cand.success, cand.part = object(), cand.rank == holder, instruction.part
 
     monkeypatch.setattr(FunctionalPlanner, "_solve", fake_solve)
     monkeypatch.setattr(FunctionalPlanner, "_validate", fake_validate)
+
+
+def test_weak_candidates_wait_only_for_the_first_solves(monkeypatch):
+    """Candidates below min_quality wait for `gate_solves` solves, not for every proposal."""
+    # all weak, best task metric first, so the validation order is the rank order
+    _fake_solves_and_verdicts(monkeypatch, 0.05, lambda rank: 1 - rank / 100, holder=3)
     obj = make_object("bottle", 1)
     for gate, solves in ((6, 6), (4, 4), (99, 16)):
         # the gate alone: no sweep after the failed validations of proposals 0-2
@@ -299,19 +305,8 @@ def test_weak_candidates_wait_only_for_the_first_solves(monkeypatch):
 def test_after_failed_validations_the_rest_are_solved_and_the_best_validated(monkeypatch):
     """After `sweep_after` failed validations every remaining proposal is solved, and the
     remaining validations go to the best task metric of all of them, not to the next batch."""
-    from planner.functional import CandidateResult
-    from planner.grasp_program import SolveResult
-
-    def fake_solve(self, program, obj, rank, proposal):
-        solved = SolveResult(proposal.wrist, proposal.q, True, 0.001, 0.0, True, "fake", 0.0)
-        # strong closure everywhere; the later proposals have the better task metric
-        return CandidateResult(rank, proposal, solved, quality=0.5, task_quality=rank / 100)
-
-    def fake_validate(self, program, obj, instruction, cand):
-        cand.grasp, cand.success, cand.part = object(), cand.rank == 12, instruction.part
-
-    monkeypatch.setattr(FunctionalPlanner, "_solve", fake_solve)
-    monkeypatch.setattr(FunctionalPlanner, "_validate", fake_validate)
+    # strong closure everywhere; the later proposals have the better task metric
+    _fake_solves_and_verdicts(monkeypatch, 0.5, lambda rank: rank / 100, holder=12)
     obj = make_object("bottle", 1)
     base = {"solve_batch": 2, "max_proposals": 16, "max_candidates": 8}
     result = FunctionalPlanner("allegro", PlannerSettings(sweep_after=4, **base)).plan(
@@ -330,19 +325,8 @@ def test_after_failed_validations_the_rest_are_solved_and_the_best_validated(mon
 def test_the_sweep_does_not_wait_for_the_queue_the_gate_released(monkeypatch):
     """The gate releases its 6 weak candidates at once; after `sweep_after` of them fail, the
     remaining proposals are solved before the rest of that queue is validated."""
-    from planner.functional import CandidateResult
-    from planner.grasp_program import SolveResult
-
-    def fake_solve(self, program, obj, rank, proposal):
-        solved = SolveResult(proposal.wrist, proposal.q, True, 0.001, 0.0, True, "fake", 0.0)
-        # weak closure everywhere (held back by the gate); later proposals rank higher
-        return CandidateResult(rank, proposal, solved, quality=0.05, task_quality=rank / 100)
-
-    def fake_validate(self, program, obj, instruction, cand):
-        cand.grasp, cand.success, cand.part = object(), cand.rank == 12, instruction.part
-
-    monkeypatch.setattr(FunctionalPlanner, "_solve", fake_solve)
-    monkeypatch.setattr(FunctionalPlanner, "_validate", fake_validate)
+    # weak closure everywhere (held back by the gate); later proposals rank higher
+    _fake_solves_and_verdicts(monkeypatch, 0.05, lambda rank: rank / 100, holder=12)
     settings = PlannerSettings(
         solve_batch=2, max_proposals=16, max_candidates=8, gate_solves=6, sweep_after=4
     )
