@@ -26,6 +26,7 @@ from eval.planner_benchmark import (
     summarize,
 )
 from models.errors import DrograspError
+from models.hands import load_hand
 from planner.functional import CandidateResult, PlannerSettings, Proposal
 from planner.grasp_program import SolveResult
 from planner.schedule import run_schedule
@@ -39,6 +40,7 @@ REPLAYABLE = (
     "sweep_after",
     "ranking",
     "max_proposals",
+    "pinch_proposals",
 )
 
 
@@ -83,16 +85,35 @@ def _candidate(summary: dict) -> CandidateResult:
     )
 
 
+def proposals_used(record: PairRecord, settings: PlannerSettings) -> list[dict]:
+    """The recorded proposals that planning with `settings` solves, ranked as
+    FunctionalPlanner.propose orders them: the regular ones, then the pinches."""
+    recorded = sorted(record.candidate_summaries, key=lambda c: c["rank"])
+    rows = [c for c in recorded if c.get("kind", "row") == "row"]
+    pinches = [c for c in recorded if c.get("kind") == "pinch"]
+    if len(rows) < settings.max_proposals:
+        raise RecordsError(
+            f"{record.hand} {record.category} {record.seed}: {len(rows)} proposals recorded, "
+            f"max_proposals={settings.max_proposals} asked; record every proposal with "
+            "--candidates 16 --set validate_all=True (or replay fewer: --set max_proposals=N)"
+        )
+    wanted = settings.pinch_proposals
+    if wanted is None:
+        wanted = load_hand(record.hand).meta.pinch_proposals
+    if len(pinches) < wanted:
+        raise RecordsError(
+            f"{record.hand} {record.category} {record.seed}: {len(pinches)} pinch proposals "
+            f"recorded, {wanted} asked; record them with --set pinch_proposals={wanted} "
+            "(or replay fewer: --set pinch_proposals=N)"
+        )
+    kept = rows[: settings.max_proposals] + pinches[:wanted]
+    return [c | {"rank": i} for i, c in enumerate(kept)]
+
+
 def replay_pair(record: PairRecord, settings: PlannerSettings) -> PairRecord:
     """The record as the planner with `settings` would have produced it."""
-    recorded = sorted(record.candidate_summaries, key=lambda c: c["rank"])
-    count = settings.max_proposals
-    if len(recorded) < count:
-        raise RecordsError(
-            f"{record.hand} {record.category} {record.seed}: {len(recorded)} proposals recorded, "
-            f"max_proposals={count} asked; record every proposal with --candidates 16 --set "
-            "validate_all=True (or replay fewer: --set max_proposals=N)"
-        )
+    recorded = proposals_used(record, settings)
+    count = len(recorded)
     unvalidated = [c["rank"] for c in recorded if c["solved"] and c["validated_as"] is None]
     if unvalidated:
         raise RecordsError(
@@ -136,16 +157,12 @@ def replay_pair(record: PairRecord, settings: PlannerSettings) -> PairRecord:
     )
 
 
-def any_holds(records: list[PairRecord], proposals: int) -> dict[str, float]:
-    """Per hand, the share of pairs where any of the first `proposals` holds on the part: the
-    most any validation order can return."""
+def any_holds(records: list[PairRecord], settings: PlannerSettings) -> dict[str, float]:
+    """Per hand, the share of pairs where any of the proposals `settings` solves holds on the
+    part: the most any validation order can return."""
     out: dict[str, list[bool]] = {}
     for r in records:
-        held = any(
-            c["success"] and c["part"] == r.part
-            for c in r.candidate_summaries
-            if c["rank"] < proposals
-        )
+        held = any(c["success"] and c["part"] == r.part for c in proposals_used(r, settings))
         out.setdefault(r.hand, []).append(held)
     return {hand: sum(v) / len(v) for hand, v in sorted(out.items())}
 
@@ -181,9 +198,12 @@ def main() -> None:
         + (f", settings {' '.join(args.set)}" if args.set else "")
     )
     print_table(summarize(replayed))
-    bound = any_holds(records, settings.max_proposals)
+    try:
+        bound = any_holds(records, settings)
+    except RecordsError as err:
+        raise SystemExit(f"error: {err}") from None
     print(
-        f"any of the first {settings.max_proposals} proposals holds on the part: "
+        "any of the proposals solved holds on the part: "
         + ", ".join(f"{hand} {share:.1%}" for hand, share in bound.items())
     )
     if args.by_part:

@@ -64,6 +64,10 @@ class PlannerSettings:
     # Allegro, README "No palm target on thin parts").
     palm_on_thin_parts: bool | None = None
     use_palm: bool = True
+    # pinch proposals (thumb and the next two anchor fingers, the last anchor finger free)
+    # solved after the max_proposals regular ones; None: as the hand's hand.json
+    # `pinch_proposals` says (default 0; 8 for LEAP, README "Pinch proposals")
+    pinch_proposals: int | None = None
     # proposals solved before the best of them are validated. With the anchor-closure order the
     # first proposals are the likeliest to hold, so small batches waste fewer solves: on the 300
     # test pairs 2 vs 4 gave the same returned rates, first-candidate 65/69/68% vs 70/70/68%
@@ -103,6 +107,8 @@ class PlannerSettings:
     def __post_init__(self) -> None:
         if self.ranking not in RANKINGS:
             raise PlanningError(f"unknown ranking {self.ranking!r}; use one of {RANKINGS}")
+        if self.pinch_proposals is not None and self.pinch_proposals < 0:
+            raise PlanningError(f"pinch_proposals must be 0 or more, got {self.pinch_proposals}")
         if self.proposal_order not in PROPOSAL_ORDERS:
             raise PlanningError(
                 f"unknown proposal_order {self.proposal_order!r}; use one of {PROPOSAL_ORDERS}"
@@ -124,6 +130,9 @@ class Proposal:
     # epsilon (planner.quality) of the anchors pushing along their inward normals, about the
     # object's centre of mass: the solve order, best first (set with proposal_order="anchors")
     anchor_quality: float = -1.0
+    # "row": thumb against a row of the other anchor fingers; "pinch": thumb and the next
+    # two anchor fingers, the last one free
+    kind: str = "row"
 
 
 @dataclass
@@ -143,6 +152,7 @@ class CandidateResult:
     def summary(self) -> dict[str, Any]:
         return {
             "rank": self.rank,
+            "kind": self.proposal.kind,
             "solved": self.solve.ok,
             "solve_message": self.solve.message,
             "success": self.success,
@@ -237,7 +247,7 @@ class HandGeometry:
         across = np.cross(n, self.lateral)
         self.opposition = across * np.sign(thumb_to_fingers @ across)
         self.normal = n
-        self.tip_centroid = half.mean(axis=0)
+        self.half_tips = half  # anchor fingertips at the half-closed pose, in the wrist frame
         self.spacing = float(np.mean(np.linalg.norm(np.diff(opened[1:], axis=0), axis=1)))
         # the widest thumb-finger fingertip distance of the half-closed pose
         self.span = float(np.max(np.linalg.norm(half[1:] - half[0], axis=1)))
@@ -284,7 +294,12 @@ class FunctionalPlanner:
         # handle held at its far end lets gravity twist a knife or pan out of the fingers.
         com = points.mean(axis=0)
         t_mass = float((com - centre) @ e1) if self.settings.mass_centred else 0.0
-        proposals = []
+        pinches = self.settings.pinch_proposals
+        if pinches is None:
+            pinches = self.hand.meta.pinch_proposals
+        # the two pinch fingers sit closer together than a row's ends, within the part
+        pinch_spacing = min(geo.spacing, max(np.ptp(t) / 2, 0.005))
+        rows, pinch = [], []
         for theta in np.deg2rad(np.arange(0, 360, self.settings.approach_step_deg)):
             # palm -> object, across the long axis
             v = rounded(np.cos(theta) * e2 + np.sin(theta) * e3)
@@ -293,21 +308,28 @@ class FunctionalPlanner:
                     [v, lateral_sign * e1], [geo.normal, geo.lateral], weights=[10, 1]
                 )
                 u = rounded(rot.apply(geo.opposition))  # thumb -> fingers, in the world
-                proposals.append(
-                    self._proposal(
-                        pts, nrm, t, away, t_mass, centre, rot, u, v, e1, spacing, tree, with_palm
-                    )
-                )
-        # Best anchor force closure first: on 150 train pairs with every candidate validated, the
-        # top quarter of proposals by anchor epsilon held 30-70% of the time (bottom quarter
-        # 5-9%), while the palm-clearance score did not predict holding (README, "Status").
+                frame = (pts, nrm, t, away, t_mass, centre, rot, u, v, e1)
+                rows.append(self._proposal(*frame, spacing, tree, with_palm))
+                if pinches:
+                    pinch.append(self._proposal(*frame, pinch_spacing, tree, with_palm, pinch=True))
+        # Pinches come after every regular proposal: mixed in by anchor closure they displaced
+        # holding rows for every hand (val replays, README "Pinch proposals").
+        rows = self._ordered(rows, com)[: self.settings.max_proposals]
+        return rows + self._ordered(pinch, com)[:pinches]
+
+    def _ordered(self, proposals: list[Proposal], com: np.ndarray) -> list[Proposal]:
+        """Best anchor force closure first: on 150 train pairs with every candidate validated,
+        the top quarter of proposals by anchor epsilon held 30-70% of the time (bottom quarter
+        5-9%), while the palm-clearance score did not predict holding (README, "Status")."""
         if self.settings.proposal_order == "anchors":
             for p in proposals:  # about 5 ms each (a 6-D hull of 24 cone edges)
-                p.anchor_quality = rounded(contact_quality(p.anchors, -p.normals, com).epsilon)
-            proposals.sort(key=lambda p: (-p.anchor_quality, -p.score))  # stable: ties keep order
-        else:
-            proposals.sort(key=lambda p: -p.score)
-        return proposals[: self.settings.max_proposals]
+                used = np.all(np.isfinite(p.anchors), axis=1)  # a pinch's free finger: NaN
+                p.anchor_quality = rounded(
+                    contact_quality(p.anchors[used], -p.normals[used], com).epsilon
+                )
+            # stable: ties keep order
+            return sorted(proposals, key=lambda p: (-p.anchor_quality, -p.score))
+        return sorted(proposals, key=lambda p: -p.score)
 
     def _thin(self, offsets: np.ndarray, e2: np.ndarray, e3: np.ndarray) -> bool:
         """Is the part narrower across its long axis than an anchor fingertip is wide?"""
@@ -323,7 +345,21 @@ class FunctionalPlanner:
         return border >= min(self.settings.border_margin, 0.5 * float(border.max()))
 
     def _proposal(
-        self, pts, nrm, t, away, t_mass, centre, rot, u, v, e1, spacing, tree, with_palm
+        self,
+        pts,
+        nrm,
+        t,
+        away,
+        t_mass,
+        centre,
+        rot,
+        u,
+        v,
+        e1,
+        spacing,
+        tree,
+        with_palm,
+        pinch=False,
     ) -> Proposal:
         geo = self.geometry
         lateral_sign = np.sign(rot.apply(geo.lateral) @ e1) or 1.0
@@ -345,7 +381,8 @@ class FunctionalPlanner:
             return int(idx[np.argmax(height)])
 
         def fingers(toward_palm: float = 0.0) -> list[int]:
-            offsets = [t_mid + k * lateral_sign * spacing for k in (-1, 0, 1)]
+            steps = (-0.5, 0.5) if pinch else (-1, 0, 1)
+            offsets = [t_mid + k * lateral_sign * spacing for k in steps]
             return [extreme(t_at, u, toward_palm) for t_at in offsets]
 
         chosen = [extreme(t_mid, -u), *fingers()]
@@ -356,14 +393,17 @@ class FunctionalPlanner:
             if thumb is not None:
                 chosen = [thumb, *row]
         anchors, normals = pts[chosen], nrm[chosen]
-        centres = anchors + normals * geo.tip_radii[:, None]
-        position = centres.mean(axis=0) - rot.apply(geo.tip_centroid)
+        n_used = len(chosen)
+        centres = anchors + normals * geo.tip_radii[:n_used, None]
+        position = centres.mean(axis=0) - rot.apply(geo.half_tips[:n_used].mean(axis=0))
+        free = np.full((len(geo.tip_radii) - n_used, 3), np.nan)  # a pinch's free fingers
+        anchors, normals = np.vstack([anchors, free]), np.vstack([normals, free])
         palm = centres.mean(axis=0) - v * self.settings.approach_clearance
         clearance = min(float(tree.query(palm)[0]), 0.1)
-        outward = float(-v @ (anchors.mean(axis=0) - centre))
+        mid = pts[chosen].mean(axis=0)
+        outward = float(-v @ (mid - centre))
         wrist = np.concatenate([position, rot.as_quat(scalar_first=True)])
         # the palm rests on the part's near side, behind the anchors: an enclosing grasp
-        mid = anchors.mean(axis=0)
         off_axis = (pts - mid) - np.outer((pts - mid) @ v, v)
         near_line = np.linalg.norm(off_axis, axis=1) < 0.015
         palm_target = None
@@ -379,6 +419,7 @@ class FunctionalPlanner:
             rounded(normals),
             rounded(score),
             None if palm_target is None else rounded(palm_target),
+            kind="pinch" if pinch else "row",
         )
 
     # ---- planning -------------------------------------------------------------------------

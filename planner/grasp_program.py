@@ -300,9 +300,13 @@ class GraspProgram:
         )
 
     def anchor_error(self, wrist: np.ndarray, q: np.ndarray, anchors: np.ndarray) -> float:
+        """Worst fingertip-surface to anchor distance over the anchored fingers (rows of NaN
+        are free fingers)."""
         centres = self.tip_centres(wrist, q)
         radii = np.array([t.radius for t in self.tips])
-        return float(np.max(np.abs(np.linalg.norm(centres - anchors, axis=1) - radii)))
+        used = np.all(np.isfinite(anchors), axis=1)
+        gaps = np.abs(np.linalg.norm(centres[used] - anchors[used], axis=1) - radii[used])
+        return float(np.max(gaps, initial=0.0))
 
     # ---- the program ----------------------------------------------------------------------
     def solve(self, targets: GraspTargets) -> SolveResult:
@@ -326,7 +330,8 @@ class GraspProgram:
                 radii = np.array([t.radius for t in self.tips])[:, None]
                 centres = rounded(anchors + normals * (radii + s.min_distance))
             for tip, frame, centre in zip(self.tips, self.tip_frames, centres, strict=True):
-                ik.AddPositionCost(world, centre, frame, tip.point, s.anchor_weight * np.eye(3))
+                if np.all(np.isfinite(centre)):  # a row of NaN leaves that finger free
+                    ik.AddPositionCost(world, centre, frame, tip.point, s.anchor_weight * np.eye(3))
         if targets.palm_target is not None:
             ik.AddPositionCost(
                 world,

@@ -9,7 +9,7 @@ import trimesh
 from models.errors import PlanningError
 from models.hands import load_hand
 from models.objects import make_object
-from planner.functional import FunctionalPlanner
+from planner.functional import FunctionalPlanner, PlannerSettings
 from planner.grasp_program import PREGRASP_SCALES, GraspTargets, ProgramSettings, grasp_program
 
 
@@ -215,3 +215,27 @@ def test_settings_override_the_hands_closing(hand_name):
     settings = ProgramSettings(squeeze_depth=3.0, pregrasp_clearance=0.002)
     given = grasp_program(hand, obj.collision_pieces(), settings)
     assert (given.squeeze_depth, given.pregrasp_clearance) == (3.0, 0.002)
+
+
+def test_a_row_of_nan_anchors_leaves_that_finger_free(hand_name):
+    """A pinch's free finger has no anchor: no position cost, and no part in the error."""
+    hand = load_hand(hand_name)
+    obj = make_object("lotion_pump", 13)
+    program = grasp_program(hand, obj.collision_pieces())
+    planner = FunctionalPlanner(hand, PlannerSettings(max_proposals=0, pinch_proposals=1))
+    (pinch,) = planner.propose(obj, "pump")
+    result = program.solve(
+        GraspTargets(pinch.wrist, pinch.q, pinch.anchors, pinch.normals, pinch.palm_target)
+    )
+    _check_feasible(hand, program, result)
+    assert np.isfinite(result.anchor_error)
+    # the error counts the anchored fingers only, however far the free one is from anything
+    centres = program.tip_centres(result.wrist, result.q)
+    radii = np.array([t.radius for t in program.tips])
+    direction = np.array([0.0, 0.0, 1.0])
+    exact = centres - radii[:, None] * direction  # each anchor on its fingertip's surface
+    exact[3:] = np.nan
+    assert program.anchor_error(result.wrist, result.q, exact) == pytest.approx(0.0, abs=1e-9)
+    far = exact.copy()
+    far[3:] = centres[3:] + 0.5
+    assert program.anchor_error(result.wrist, result.q, far) > 0.4

@@ -400,3 +400,42 @@ def test_a_hand_file_can_keep_the_palm_off_thin_parts(tmp_path):
     (folder / "hand.json").write_text(json.dumps({**meta, "palm_on_thin_parts": False}))
     proposals = FunctionalPlanner(load_hand(folder)).propose(make_object("pen", 8), "barrel")
     assert all(p.palm_target is None for p in proposals)
+
+
+def test_pinch_proposals_follow_the_regular_ones(hand_name):
+    obj = make_object("lotion_pump", 13)  # a pump head narrower than LEAP's fingertip row
+    planner = FunctionalPlanner(hand_name, PlannerSettings(pinch_proposals=4))
+    proposals = planner.propose(obj, "pump")
+    kinds = [p.kind for p in proposals]
+    rows = planner.settings.max_proposals
+    assert kinds == ["row"] * rows + ["pinch"] * 4
+    free = len(planner.hand.meta.anchor_fingers) - 3  # thumb and two fingers on the part
+    for p in proposals[rows:]:
+        assert np.all(np.isfinite(p.anchors[:3])) and np.all(np.isnan(p.anchors[3:]))
+        assert np.isnan(p.anchors).sum() == 3 * free
+        assert np.isfinite(p.anchor_quality)
+    # each group best anchor closure first
+    for group in (proposals[:rows], proposals[rows:]):
+        qualities = [p.anchor_quality for p in group]
+        assert qualities == sorted(qualities, reverse=True)
+    # by default as many as the hand file says
+    default = FunctionalPlanner(hand_name).propose(obj, "pump")
+    assert sum(p.kind == "pinch" for p in default) == planner.hand.meta.pinch_proposals
+    with pytest.raises(PlanningError, match="pinch_proposals"):
+        PlannerSettings(pinch_proposals=-1)
+
+
+def test_a_planned_pinch_leaves_its_free_finger_out_of_the_anchor_error(hand_name):
+    obj = make_object("lotion_pump", 13)
+    settings = PlannerSettings(
+        max_proposals=0, pinch_proposals=2, max_candidates=2, validate_all=True
+    )
+    result = FunctionalPlanner(hand_name, settings).plan(obj, "Use a lotion pump by pump")
+    assert [c.proposal.kind for c in result.candidates] == ["pinch", "pinch"]
+    summaries = [c.summary() for c in result.candidates]
+    assert all(s["kind"] == "pinch" for s in summaries)
+    solved = [c for c in result.candidates if c.solve.ok]
+    assert solved, [c.solve.message for c in result.candidates]
+    for c in solved:
+        assert np.isfinite(c.solve.anchor_error)
+        assert c.solve.anchor_error < 0.03
