@@ -37,7 +37,7 @@ def test_replay_of_all_validated_records_is_the_plan(hand_name, tmp_path):
     small = PlannerSettings(max_proposals=8, max_candidates=4, sweep_after=2, min_quality=0.0)
     obj = make_object("mug", 3)
     planned = FunctionalPlanner(hand_name, small).plan(obj, TEXT)
-    everything = replace(small, max_candidates=8, validate_all=True)
+    everything = replace(small, max_candidates=32, validate_all=True)  # every solved one
     recorded = FunctionalPlanner(hand_name, everything).plan(obj, TEXT)
     path = tmp_path / "records.jsonl"
     path.write_text(json.dumps(asdict(_record(recorded, "handle"))) + "\n")
@@ -73,9 +73,11 @@ def test_records_without_every_verdict_are_refused(tmp_path):
     record = PairRecord("leap", "mug", 3, TEXT, "handle", False, False, False, False, 1, [], 0.0)
     record.candidate_summaries = [summary]
     with pytest.raises(RecordsError, match="validate_all"):
-        replay_pair(record, PlannerSettings(max_proposals=1))
+        replay_pair(record, PlannerSettings(max_proposals=1, pinch_proposals=0))
     with pytest.raises(RecordsError, match="max_proposals"):
-        replay_pair(record, PlannerSettings(max_proposals=2))
+        replay_pair(record, PlannerSettings(max_proposals=2, pinch_proposals=0))
+    with pytest.raises(RecordsError, match="pinch_proposals"):
+        replay_pair(record, PlannerSettings(max_proposals=1, pinch_proposals=1))
     path = tmp_path / "broken.jsonl"
     path.write_text("{not json\n")
     with pytest.raises(RecordsError, match="cannot read"):
