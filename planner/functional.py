@@ -219,6 +219,7 @@ class PlanResult:
             "candidates_solved": len(self.candidates),
             "candidates_validated": sum(c.order is not None for c in self.candidates),
             "chosen_rank": None if best is None else best.rank,
+            "chosen_kind": None if best is None else best.proposal.kind,
             "chosen_validated_as": None if best is None else best.order,
             "times_s": self.stage_times(),
             "notes": self.notes,

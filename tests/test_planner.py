@@ -440,6 +440,7 @@ def test_a_planned_pinch_leaves_its_free_finger_out_of_the_anchor_error(hand_nam
     assert [c.proposal.kind for c in result.candidates] == ["pinch", "pinch"]
     summaries = [c.summary() for c in result.candidates]
     assert all(s["kind"] == "pinch" for s in summaries)
+    assert result.summary()["chosen_kind"] in (None, "pinch")
     solved = [c for c in result.candidates if c.solve.ok]
     assert solved, [c.solve.message for c in result.candidates]
     for c in solved:

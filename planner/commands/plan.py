@@ -56,7 +56,8 @@ def print_summary(result: PlanResult) -> None:
     chosen = (
         "none chosen"
         if s["chosen_rank"] is None
-        else f"chosen: proposal {s['chosen_rank']}, validated as #{s['chosen_validated_as']}"
+        else f"chosen: {s['chosen_kind']} proposal {s['chosen_rank']}, "
+        f"validated as #{s['chosen_validated_as']}"
     )
     print(
         f"  candidates: {s['candidates_solved']} solved, {s['candidates_validated']} validated; "
