@@ -66,7 +66,7 @@ class PlannerSettings:
     use_palm: bool = True
     # pinch proposals (thumb and the next two anchor fingers, the last anchor finger free)
     # solved after the max_proposals regular ones; None: as the hand's hand.json
-    # `pinch_proposals` says (default 0; 4 for LEAP, README "Pinch proposals")
+    # `pinch_proposals` says (default 0; 8 for LEAP, README "Pinch proposals")
     pinch_proposals: int | None = None
     # proposals solved before the best of them are validated. With the anchor-closure order the
     # first proposals are the likeliest to hold, so small batches waste fewer solves: on the 300
