@@ -313,8 +313,8 @@ class FunctionalPlanner:
                 rows.append(self._proposal(*frame, spacing, tree, with_palm))
                 if pinches:
                     pinch.append(self._proposal(*frame, pinch_spacing, tree, with_palm, pinch=True))
-        # Pinches come after every regular proposal: mixed in by anchor closure they displaced
-        # holding rows for every hand (val replays, README "Pinch proposals").
+        # Pinches come after every regular proposal: mixed into their ranking by anchor closure
+        # they did worse for every hand on the val replays (README "Pinch proposals").
         rows = self._ordered(rows, com)[: self.settings.max_proposals]
         return rows + self._ordered(pinch, com)[:pinches]
 

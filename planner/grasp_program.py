@@ -114,7 +114,8 @@ class SolveResult:
 class GraspTargets:
     """What the program should achieve. Any part may be absent.
 
-    anchors: (4, 3) object surface points for the hand's anchor fingers (hand.json order);
+    anchors: (4, 3) object surface points for the hand's anchor fingers (hand.json order); a
+    row of NaN leaves that finger free (a pinch's fourth finger);
     anchor_normals: (4, 3) outward normals there, so the fingertip sphere rests on the point;
     point_targets: (P, 3) world targets for hand surface points `point_index` (indices into
     the 512 fixed points), e.g. from multilateration of a predicted D(R,O)."""

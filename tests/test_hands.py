@@ -277,3 +277,15 @@ def test_user_hand_closing_values_must_be_positive(tmp_path):
         (folder / "hand.json").write_text(json.dumps({**meta, field: value}))
         with pytest.raises(HandError, match=f"{field} must be a positive number"):
             load_hand(folder)
+
+
+def test_user_hand_pinch_proposals_must_be_a_count(tmp_path):
+    folder = tmp_path / "pinches"
+    shutil.copytree(load_hand("allegro").folder, folder)
+    meta = json.loads((folder / "hand.json").read_text())
+    for bad in (-1, 2.5, "4"):
+        (folder / "hand.json").write_text(json.dumps({**meta, "pinch_proposals": bad}))
+        with pytest.raises(HandError, match="pinch_proposals must be a whole number"):
+            load_hand(folder)
+    (folder / "hand.json").write_text(json.dumps({**meta, "pinch_proposals": 3}))
+    assert load_hand(folder).meta.pinch_proposals == 3

@@ -124,6 +124,11 @@ def read_meta(path: Path) -> HandMeta:
         for t in raw["fingertips"]
     )
     names = {t.name for t in tips}
+    pinches = raw.get("pinch_proposals", 0)
+    if not isinstance(pinches, int) or isinstance(pinches, bool) or pinches < 0:
+        raise HandError(
+            f"{path}: pinch_proposals must be a whole number, 0 or more; got {pinches!r}"
+        )
     unknown = [f for f in raw["anchor_fingers"] if f not in names]
     if unknown or len(raw["anchor_fingers"]) != 4:
         raise HandError(
@@ -167,7 +172,7 @@ def read_meta(path: Path) -> HandMeta:
         joint_frictionloss=float(raw.get("joint_dynamics", {}).get("frictionloss", 0.0)),
         program_hull_links=tuple(raw.get("program_hull_links", ())),
         palm_on_thin_parts=bool(raw.get("palm_on_thin_parts", True)),
-        pinch_proposals=int(raw.get("pinch_proposals", 0)),
+        pinch_proposals=pinches,
         **closing,
         source=raw.get("source", ""),
     )
