@@ -39,7 +39,9 @@ def test_proposals_ignore_last_bit_differences_in_the_object(hand_name):
     )
     assert not np.array_equal(moved.points, obj.points)
     for a, b in zip(planner.propose(obj, "handle"), planner.propose(moved, "handle"), strict=True):
-        assert np.array_equal(a.wrist, b.wrist) and np.array_equal(a.anchors, b.anchors)
+        # equal_nan: a pinch's free finger has a NaN anchor row
+        assert np.array_equal(a.wrist, b.wrist)
+        assert np.array_equal(a.anchors, b.anchors, equal_nan=True)
         assert a.anchor_quality == b.anchor_quality
 
 
