@@ -34,6 +34,7 @@ from planner.grasp_program import (
     GraspTargets,
     ProgramSettings,
     SolveResult,
+    anchored,
     grasp_program,
 )
 from planner.labels import voted_part
@@ -324,7 +325,7 @@ class FunctionalPlanner:
         5-9%), while the palm-clearance score did not predict holding (README, "Status")."""
         if self.settings.proposal_order == "anchors":
             for p in proposals:  # about 5 ms each (a 6-D hull of 24 cone edges)
-                used = np.all(np.isfinite(p.anchors), axis=1)  # a pinch's free finger: NaN
+                used = anchored(p.anchors)
                 p.anchor_quality = rounded(
                     contact_quality(p.anchors[used], -p.normals[used], com).epsilon
                 )

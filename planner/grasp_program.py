@@ -130,6 +130,12 @@ class GraspTargets:
     fix_wrist: bool = False
 
 
+def anchored(anchors: np.ndarray) -> np.ndarray:
+    """Mask of the anchor rows that bind a finger: a row of NaN leaves that finger free (the
+    last finger of a pinch proposal)."""
+    return np.all(np.isfinite(anchors), axis=1)
+
+
 def _normalize_wrist(wrist: np.ndarray) -> np.ndarray:
     wrist = np.asarray(wrist, dtype=float).copy()
     wrist[3:7] /= np.linalg.norm(wrist[3:7])
@@ -305,7 +311,7 @@ class GraspProgram:
         are free fingers)."""
         centres = self.tip_centres(wrist, q)
         radii = np.array([t.radius for t in self.tips])
-        used = np.all(np.isfinite(anchors), axis=1)
+        used = anchored(anchors)
         gaps = np.abs(np.linalg.norm(centres[used] - anchors[used], axis=1) - radii[used])
         return float(np.max(gaps, initial=0.0))
 
@@ -330,8 +336,10 @@ class GraspProgram:
                 normals = normals / np.linalg.norm(normals, axis=1, keepdims=True)
                 radii = np.array([t.radius for t in self.tips])[:, None]
                 centres = rounded(anchors + normals * (radii + s.min_distance))
-            for tip, frame, centre in zip(self.tips, self.tip_frames, centres, strict=True):
-                if np.all(np.isfinite(centre)):  # a row of NaN leaves that finger free
+            for tip, frame, centre, bound in zip(
+                self.tips, self.tip_frames, centres, anchored(centres), strict=True
+            ):
+                if bound:
                     ik.AddPositionCost(world, centre, frame, tip.point, s.anchor_weight * np.eye(3))
         if targets.palm_target is not None:
             ik.AddPositionCost(
