@@ -2,8 +2,9 @@
 
 A candidate's solve and verdict do not depend on the order in which the planner reaches them,
 so on benchmark records in which every proposal was solved and every solved candidate validated
-(`eval.planner_benchmark --candidates 16 --set validate_all=True --out RECORDS.jsonl`), running
-the policy of `planner.schedule` with other settings gives what planning with them would give.
+(`eval.planner_benchmark --candidates 24 --set validate_all=True --out RECORDS.jsonl`: the 16
+proposals and LEAP's 8 pinches after them), running the policy of `planner.schedule` with other
+settings gives what planning with them would give.
 Times per grasp are the recorded stage times of the solves and validations the policy uses.
 
     python -m eval.replay RECORDS.jsonl [--candidates 8] [--set sweep_after=null gate_solves=8]
@@ -95,7 +96,7 @@ def proposals_used(record: PairRecord, settings: PlannerSettings) -> list[dict]:
         raise RecordsError(
             f"{record.hand} {record.category} {record.seed}: {len(rows)} proposals recorded, "
             f"max_proposals={settings.max_proposals} asked; record every proposal with "
-            "--candidates 16 --set validate_all=True (or replay fewer: --set max_proposals=N)"
+            "--candidates 24 --set validate_all=True (or replay fewer: --set max_proposals=N)"
         )
     wanted = settings.pinch_proposals
     if wanted is None:
@@ -104,7 +105,7 @@ def proposals_used(record: PairRecord, settings: PlannerSettings) -> list[dict]:
         raise RecordsError(
             f"{record.hand} {record.category} {record.seed}: {len(pinches)} pinch proposals "
             f"recorded, {wanted} asked; record them with --set pinch_proposals={wanted} "
-            "(or replay fewer: --set pinch_proposals=N)"
+            "(or replay fewer: --set pinch_proposals=N; 0 for records made before pinches)"
         )
     kept = rows[: settings.max_proposals] + pinches[:wanted]
     return [c | {"rank": i} for i, c in enumerate(kept)]
@@ -118,7 +119,7 @@ def replay_pair(record: PairRecord, settings: PlannerSettings) -> PairRecord:
     if unvalidated:
         raise RecordsError(
             f"{record.hand} {record.category} {record.seed}: solved candidates {unvalidated} were "
-            "not validated; record with --candidates 16 --set validate_all=True"
+            "not validated; record with --candidates 24 --set validate_all=True (as many as proposals)"
         )
     verdicts = {c["rank"]: (bool(c["success"]), c["part"]) for c in recorded}
 
