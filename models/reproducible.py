@@ -13,7 +13,7 @@ and solves on mug 3 are then bit-identical; before, the solves' anchor errors mo
 (NPY_DISABLE_CPU_FEATURES), Drake's forward kinematics from the same positions still changes in
 the last bit, by a path not found, and so do the plans. Figures therefore reproduce exactly on
 the same kind of machine with the pinned packages (constraints.txt), elsewhere within a few
-points (README, "Status").
+points (docs/planner_log.md, "Reproducing the figures").
 """
 
 from __future__ import annotations

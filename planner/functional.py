@@ -62,12 +62,12 @@ class PlannerSettings:
     span_factor: float = 1.25
     # May proposals on parts thinner than an anchor fingertip (pens, knife handles) carry a palm
     # target? None: as the hand's hand.json `palm_on_thin_parts` says (default true; false for
-    # Allegro, README "No palm target on thin parts").
+    # Allegro, docs/planner_log.md "No palm target on thin parts").
     palm_on_thin_parts: bool | None = None
     use_palm: bool = True
     # pinch proposals (thumb and the next two anchor fingers, the last anchor finger free)
     # solved after the max_proposals regular ones; None: as the hand's hand.json
-    # `pinch_proposals` says (default 0; 8 for LEAP, README "Pinch proposals")
+    # `pinch_proposals` says (default 0; 8 for LEAP, docs/planner_log.md "Pinch proposals")
     pinch_proposals: int | None = None
     # proposals solved before the best of them are validated. With the anchor-closure order the
     # first proposals are the likeliest to hold, so small batches waste fewer solves: on the 300
@@ -83,14 +83,14 @@ class PlannerSettings:
     # validation queue (best task metric first) instead of waiting until every proposal is
     # solved. Replayed on all-validated records of the validation split, 6 vs never gave
     # returned success 85/95/95% vs 86/93/93% with 4.1/5.1/4.0 vs 6.7/7.9/7.2 solves per
-    # returned grasp (README, "Gate on the first solves").
+    # returned grasp (docs/planner_log.md, "Gate on the first solves").
     gate_solves: int = 6
     # After this many validations without a grasp that holds on the part, every remaining
     # proposal is solved before the next validation (even in the middle of a batch's queue), so
     # the rest of the `max_candidates` go to the best of all of them (task metric) instead of
     # to whichever batch comes next. Replayed on all-validated records of the validation split,
     # 3 gave 94/95/100% held on the part against 93/95/99% at 4 and 86/93/95% without a sweep
-    # (README, "Sweep after failed validations").
+    # (docs/planner_log.md, "Sweep after failed validations").
     # None: batch by batch to the end.
     sweep_after: int | None = 3
     contact_distance: float = 0.006  # m: hand geometry this close to the object counts as contact
@@ -315,14 +315,15 @@ class FunctionalPlanner:
                 if pinches:
                     pinch.append(self._proposal(*frame, pinch_spacing, tree, with_palm, pinch=True))
         # Pinches come after every regular proposal: mixed into their ranking by anchor closure
-        # they did worse for every hand on the val replays (README "Pinch proposals").
+        # they did worse for every hand on the val replays (docs/planner_log.md "Pinch proposals").
         rows = self._ordered(rows, com)[: self.settings.max_proposals]
         return rows + self._ordered(pinch, com)[:pinches]
 
     def _ordered(self, proposals: list[Proposal], com: np.ndarray) -> list[Proposal]:
         """Best anchor force closure first: on 150 train pairs with every candidate validated,
         the top quarter of proposals by anchor epsilon held 30-70% of the time (bottom quarter
-        5-9%), while the palm-clearance score did not predict holding (README, "Status")."""
+        5-9%), while the palm-clearance score did not predict holding (docs/planner_log.md,
+        "Proposal order")."""
         if self.settings.proposal_order == "anchors":
             for p in proposals:  # about 5 ms each (a 6-D hull of 24 cone edges)
                 used = anchored(p.anchors)

@@ -54,8 +54,8 @@ class ProgramSettings:
     # Hand-object and hand-hand signed distances as two constraints instead of one. Drake folds
     # every pair into one smoothed penalty, so fingers lying side by side used up the budget
     # of the hand-object pairs; on 48 fixed proposals per hand, two constraints gave 25 vs 21
-    # held for LEAP and 31 vs 27 for Shadow (Allegro 18 vs 21). See the README, "Two distance
-    # constraints".
+    # held for LEAP and 31 vs 27 for Shadow (Allegro 18 vs 21). See docs/planner_log.md, "Two
+    # distance constraints".
     separate_hand_hand: bool = True
     penetration_tolerance: float = 0.002  # accepted penetration when checking an answer (m)
     # accepted fingertip-surface to anchor distance (m). Validation judges the grasp; this only

@@ -76,12 +76,13 @@ class HandMeta:
     # Pinch proposals (thumb and the next two anchor fingers on the part, the last one free)
     # solved after the regular ones. LEAP's wide fingertips cannot all fit on small parts (pump
     # heads, triggers, blades): 8 of them raise its grasps held on the part 94 -> 96% on train
-    # and 95 -> 97% on val (README, "Pinch proposals").
+    # and 95 -> 97% on val (docs/planner_log.md, "Pinch proposals").
     pinch_proposals: int
     # How the fingers close in validation: the anchor fingertips back off `pregrasp_clearance`
     # (m, mean) at the pregrasp, and squeeze = grasp + squeeze_depth x (grasp - pregrasp).
     # BODex's 1 cm and 1 by default; Allegro closes from 5 mm to twice that past the contact,
-    # the same squeeze target with half the travel (README, "Allegro's shorter closing").
+    # the same squeeze target with half the travel (docs/planner_log.md, "Allegro's shorter
+    # closing").
     pregrasp_clearance: float
     squeeze_depth: float
     source: str  # where the kinematics come from (for provenance and vendor checks)
