@@ -47,7 +47,7 @@ REPLAYABLE = (
 
 # recorded stage times (CandidateResult.times) that a solved / a validated candidate costs
 SOLVE_STAGES = ("build", "propose", "solve", "quality")
-VALIDATE_STAGES = ("pregrasp", "validate")
+VALIDATE_STAGES = ("pregrasp", "validate", "retry")
 
 
 class RecordsError(DrograspError):

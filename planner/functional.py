@@ -15,7 +15,7 @@ touches the instructed part is returned with every candidate's outcome.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 from typing import Any
 
@@ -166,6 +166,8 @@ class CandidateResult:
             ),
             "anchor_error_mm": 1000 * self.solve.anchor_error,
             "min_distance_mm": 1000 * self.solve.min_distance,
+            # the recorded squeeze: the hand's, or the retry's where only that one held
+            "squeeze_depth": None if self.grasp is None else self.grasp.metrics["squeeze_depth"],
             "times": self.times,
         }
 
@@ -222,6 +224,7 @@ class PlanResult:
             "chosen_rank": None if best is None else best.rank,
             "chosen_kind": None if best is None else best.proposal.kind,
             "chosen_validated_as": None if best is None else best.order,
+            "chosen_squeeze_depth": None if best is None else best.grasp.metrics["squeeze_depth"],
             "times_s": self.stage_times(),
             "notes": self.notes,
         }
@@ -541,7 +544,9 @@ def finish_grasp(
     """Pregrasp (anchor fingertips about 1 cm off the surface, offsets set by balanced squeeze
     forces and shrunk where a link would be inside the object: GraspProgram.pregrasp), BODex
     squeeze, the Grasp record, MuJoCo validation and the voted part: every planned or
-    transferred grasp goes through these same steps."""
+    transferred grasp goes through these same steps. A grasp that slips is validated once more
+    with the deeper squeeze of `program.retry_squeeze_depth`, where the hand has one, and the
+    squeeze that held is the one recorded (`metrics["squeeze_depth"]`)."""
     t1 = time.perf_counter()
     hand = program.hand
     wrist_t = torch.tensor(solved.wrist[None])
@@ -561,8 +566,18 @@ def finish_grasp(
         instruction=instruction,
     )
     t2 = time.perf_counter()
-    result = validate(grasp, obj.collision_pieces(), hand, protocol)
-    t3 = time.perf_counter()
+    pieces = obj.collision_pieces()
+    result = validate(grasp, pieces, hand, protocol)
+    depth = program.squeeze_depth
+    times = {"pregrasp": t2 - t1, "validate": time.perf_counter() - t2}
+    retry = program.retry_squeeze_depth
+    if not result.success and retry is not None:
+        t3 = time.perf_counter()
+        deeper = replace(grasp, squeeze=program.squeeze(solved.q, pre, retry), metrics={})
+        again = validate(deeper, pieces, hand, protocol)
+        times["retry"] = time.perf_counter() - t3
+        if again.success:
+            grasp, result, depth = deeper, again, retry
     all_tips = hand.fingertip_positions(wrist_t, q_t)[0].numpy()
     part = voted_part(all_tips, obj.points, obj.point_labels, obj.part_names)
     validation = result.to_dict()
@@ -572,10 +587,10 @@ def finish_grasp(
             "part": part,
             "anchor_error": solved.anchor_error,
             "min_distance": solved.min_distance,
+            "squeeze_depth": depth,
             "validation": validation,
         }
     )
-    times = {"pregrasp": t2 - t1, "validate": t3 - t2}
     return FinishedGrasp(grasp, bool(result.success), part, validation, times)
 
 

@@ -81,6 +81,9 @@ class ProgramSettings:
     # before contact, and with the depth the squeeze offset past it; None: the hand's hand.json
     # `pregrasp_clearance` (default 1 cm)
     pregrasp_clearance: float | None = None
+    # a deeper squeeze validated when a grasp slips at `squeeze_depth` (finish_grasp); None:
+    # the hand's hand.json `retry_squeeze_depth` (default none); 0: no retry
+    retry_squeeze_depth: float | None = None
 
     def __post_init__(self) -> None:
         if self.pregrasp_rule not in PREGRASP_RULES:
@@ -207,6 +210,14 @@ class GraspProgram:
         """The settings' squeeze depth, else the hand's (hand.json)."""
         depth = self.settings.squeeze_depth
         return self.hand.meta.squeeze_depth if depth is None else depth
+
+    @property
+    def retry_squeeze_depth(self) -> float | None:
+        """The deeper squeeze tried after a slip: the settings' (0: none), else the hand's."""
+        depth = self.settings.retry_squeeze_depth
+        if depth is None:
+            return self.hand.meta.retry_squeeze_depth
+        return depth if depth > 0 else None
 
     @property
     def pregrasp_clearance(self) -> float:
@@ -525,10 +536,13 @@ class GraspProgram:
                 return candidate
         return open_q.copy()
 
-    def squeeze(self, q: np.ndarray, pregrasp: np.ndarray) -> np.ndarray:
+    def squeeze(
+        self, q: np.ndarray, pregrasp: np.ndarray, depth: float | None = None
+    ) -> np.ndarray:
         """squeeze = grasp + depth x (grasp - pregrasp) (BODex's rule at depth 1), within limits:
-        the position targets past the contacts are what make the fingers press."""
-        depth = self.squeeze_depth
+        the position targets past the contacts are what make the fingers press. `depth`: the
+        program's squeeze depth unless given (the retry's)."""
+        depth = self.squeeze_depth if depth is None else depth
         return np.clip((1 + depth) * q - depth * pregrasp, self.hand.lower, self.hand.upper)
 
 

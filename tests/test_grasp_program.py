@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import pytest
 import trimesh
@@ -9,6 +11,7 @@ import trimesh
 from models.errors import PlanningError
 from models.hands import load_hand
 from models.objects import make_object
+from planner import functional
 from planner.functional import FunctionalPlanner, PlannerSettings
 from planner.grasp_program import PREGRASP_SCALES, GraspTargets, ProgramSettings, grasp_program
 
@@ -215,6 +218,11 @@ def test_settings_override_the_hands_closing(hand_name):
     settings = ProgramSettings(squeeze_depth=3.0, pregrasp_clearance=0.002)
     given = grasp_program(hand, obj.collision_pieces(), settings)
     assert (given.squeeze_depth, given.pregrasp_clearance) == (3.0, 0.002)
+    assert own.retry_squeeze_depth == hand.meta.retry_squeeze_depth
+    retry = grasp_program(hand, obj.collision_pieces(), ProgramSettings(retry_squeeze_depth=5.0))
+    assert retry.retry_squeeze_depth == 5.0
+    none = grasp_program(hand, obj.collision_pieces(), ProgramSettings(retry_squeeze_depth=0))
+    assert none.retry_squeeze_depth is None
 
 
 def test_a_row_of_nan_anchors_leaves_that_finger_free(hand_name):
@@ -239,3 +247,50 @@ def test_a_row_of_nan_anchors_leaves_that_finger_free(hand_name):
     far = exact.copy()
     far[3:] = centres[3:] + 0.5
     assert program.anchor_error(result.wrist, result.q, far) > 0.4
+
+
+@dataclass
+class _Verdict:
+    success: bool
+
+    def to_dict(self) -> dict:
+        return {"success": self.success}
+
+
+def test_a_slipping_grasp_is_validated_again_with_the_deeper_squeeze(hand_name, monkeypatch):
+    """finish_grasp validates the retry's squeeze only after a slip, and records the squeeze
+    that held; without a retry depth one validation decides."""
+    hand = load_hand(hand_name)
+    obj = make_object("bottle", 1)
+    (proposal,) = FunctionalPlanner(
+        hand, PlannerSettings(max_proposals=1, pinch_proposals=0)
+    ).propose(obj, "body")
+    targets = GraspTargets(proposal.wrist, proposal.q, proposal.anchors, proposal.normals)
+    squeezes: list[np.ndarray] = []
+
+    def fake_validate(grasp, *args):  # holds only with the deeper squeeze
+        squeezes.append(grasp.squeeze)
+        return _Verdict(len(squeezes) == 2)
+
+    monkeypatch.setattr(functional, "validate", fake_validate)
+    program = grasp_program(hand, obj.collision_pieces(), ProgramSettings(retry_squeeze_depth=3.0))
+    solved = program.solve(targets)
+    done = functional.finish_grasp(program, obj, solved, "Hold a bottle by body", "paper")
+    pre = done.grasp.pregrasp
+    first, deeper = program.squeeze(solved.q, pre), program.squeeze(solved.q, pre, 3.0)
+    assert not np.allclose(first, deeper)
+    assert np.array_equal(squeezes[0], first) and np.array_equal(squeezes[1], deeper)
+    assert done.success and np.array_equal(done.grasp.squeeze, deeper)
+    assert done.grasp.metrics["squeeze_depth"] == 3.0 and "retry" in done.times
+
+    squeezes.clear()
+    monkeypatch.setattr(functional, "validate", lambda g, *a: squeezes.append(g) or _Verdict(False))
+    done = functional.finish_grasp(program, obj, solved, "Hold a bottle by body", "paper")
+    assert len(squeezes) == 2 and not done.success  # both slip: the first squeeze is kept
+    assert np.array_equal(done.grasp.squeeze, first)
+    assert done.grasp.metrics["squeeze_depth"] == program.squeeze_depth
+
+    squeezes.clear()
+    once = grasp_program(hand, obj.collision_pieces(), ProgramSettings(retry_squeeze_depth=0))
+    done = functional.finish_grasp(once, obj, once.solve(targets), "Hold a bottle", "paper")
+    assert len(squeezes) == 1 and "retry" not in done.times

@@ -85,6 +85,11 @@ class HandMeta:
     # closing").
     pregrasp_clearance: float
     squeeze_depth: float
+    # A second, deeper squeeze validated when a grasp slips at `squeeze_depth` (None: none).
+    # Parts far from the centre of mass (pump heads, mug handles) turn in LEAP's fingers at depth
+    # 1 and hold at depth 2, while depth 2 for every grasp loses others (docs/planner_log.md,
+    # "Squeeze retry").
+    retry_squeeze_depth: float | None
     source: str  # where the kinematics come from (for provenance and vendor checks)
 
     def fingertip(self, name: str) -> Fingertip:
@@ -150,6 +155,15 @@ def read_meta(path: Path) -> HandMeta:
         if not number or not np.isfinite(value) or value <= 0:
             raise HandError(f"{path}: {field} must be a positive number, got {value!r}")
         closing[field] = float(value)
+    retry = raw.get("retry_squeeze_depth")
+    if retry is not None:
+        number = isinstance(retry, (int, float)) and not isinstance(retry, bool)
+        if not number or not np.isfinite(retry) or retry <= closing["squeeze_depth"]:
+            raise HandError(
+                f"{path}: retry_squeeze_depth must be null or a number above squeeze_depth "
+                f"({closing['squeeze_depth']}), got {retry!r}"
+            )
+        retry = float(retry)
     return HandMeta(
         name=raw["name"],
         urdf=raw["urdf"],
@@ -175,5 +189,6 @@ def read_meta(path: Path) -> HandMeta:
         palm_on_thin_parts=bool(raw.get("palm_on_thin_parts", True)),
         pinch_proposals=pinches,
         **closing,
+        retry_squeeze_depth=retry,
         source=raw.get("source", ""),
     )

@@ -57,7 +57,7 @@ def print_summary(result: PlanResult) -> None:
         "none chosen"
         if s["chosen_rank"] is None
         else f"chosen: {s['chosen_kind']} proposal {s['chosen_rank']}, "
-        f"validated as #{s['chosen_validated_as']}"
+        f"validated as #{s['chosen_validated_as']}, squeeze depth {s['chosen_squeeze_depth']:g}"
     )
     print(
         f"  candidates: {s['candidates_solved']} solved, {s['candidates_validated']} validated; "
