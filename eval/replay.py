@@ -8,12 +8,17 @@ settings gives what planning with them would give.
 Times per grasp are the recorded stage times of the solves and validations the policy uses.
 
     python -m eval.replay RECORDS.jsonl [--candidates 8] [--set sweep_after=null gate_solves=8]
+
+`--retry DEEPER.jsonl` (records of the same pairs made with a deeper squeeze,
+`--set program.squeeze_depth=D program.retry_squeeze_depth=0`) replays a squeeze retry at that
+depth: a candidate that slips in RECORDS holds if it holds in DEEPER, as `finish_grasp` decides.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -60,6 +65,40 @@ def load_records(path: Path) -> list[PairRecord]:
         return read_records(path)
     except (OSError, json.JSONDecodeError, TypeError) as err:
         raise RecordsError(f"cannot read benchmark records from {path}: {err}") from err
+
+
+def with_retry(records: list[PairRecord], deeper: list[PairRecord]) -> list[PairRecord]:
+    """`records` as a squeeze retry at the depth of `deeper` would have made them: a candidate
+    that slipped holds where it held in `deeper` (its voted part depends on the grasp, not on the
+    squeeze), and the retry's validation time is added. The two must hold the same pairs and
+    the same solves: only the squeeze may differ."""
+    if len(records) != len(deeper):
+        raise RecordsError(f"{len(records)} records but {len(deeper)} with the deeper squeeze")
+    merged = []
+    for rec, deep in zip(records, deeper, strict=True):
+        key = (rec.hand, rec.category, rec.seed, rec.instruction)
+        if key != (deep.hand, deep.category, deep.seed, deep.instruction):
+            raise RecordsError(
+                f"the deeper squeeze's records hold {deep.instruction!r} where "
+                f"{rec.instruction!r} was expected: record the same pairs"
+            )
+        other = {c["rank"]: c for c in deep.candidate_summaries}
+        summaries = []
+        for c in rec.candidate_summaries:
+            d = other.get(c["rank"])
+            if d is None or (c["solved"], c["task_quality"]) != (d["solved"], d["task_quality"]):
+                raise RecordsError(
+                    f"{rec.hand} {rec.category} {rec.seed}: candidate {c['rank']} was solved "
+                    "differently with the deeper squeeze; record both with the same settings "
+                    "but the squeeze depth"
+                )
+            c = dict(c)
+            if c["solved"] and not c["success"] and d["validated_as"] is not None:
+                c["times"] = c["times"] | {"retry": d["times"].get("validate", 0.0)}
+                c["success"] = bool(d["success"])
+            summaries.append(c)
+        merged.append(replace(rec, candidate_summaries=summaries))
+    return merged
 
 
 def _candidate(summary: dict) -> CandidateResult:
@@ -180,6 +219,12 @@ def main() -> None:
         help=f"policy settings: {', '.join(REPLAYABLE)}",
     )
     parser.add_argument("--by-part", action="store_true", help="returned success per part")
+    parser.add_argument(
+        "--retry",
+        type=Path,
+        metavar="DEEPER",
+        help="records of the same pairs with a deeper squeeze: replay a squeeze retry",
+    )
     args = parser.parse_args()
     for item in args.set:
         name = item.partition("=")[0].strip()
@@ -191,12 +236,15 @@ def main() -> None:
     settings = planner_settings(args.candidates, args.set)
     try:
         records = load_records(args.records)
+        if args.retry is not None:
+            records = with_retry(records, load_records(args.retry))
         replayed = [replay_pair(r, settings) for r in records]
     except RecordsError as err:
         raise SystemExit(f"error: {err}") from None
     print(
         f"{len(records)} recorded pairs replayed, up to {args.candidates} validations"
         + (f", settings {' '.join(args.set)}" if args.set else "")
+        + (f", slips retried as in {args.retry}" if args.retry else "")
     )
     print_table(summarize(replayed))
     try:

@@ -6,7 +6,7 @@ from dataclasses import asdict, replace
 import pytest
 
 from eval.planner_benchmark import PairRecord
-from eval.replay import RecordsError, load_records, replay_pair
+from eval.replay import RecordsError, load_records, replay_pair, with_retry
 from models.objects import make_object
 from planner.functional import FunctionalPlanner, PlannerSettings
 
@@ -82,3 +82,39 @@ def test_records_without_every_verdict_are_refused(tmp_path):
     path.write_text("{not json\n")
     with pytest.raises(RecordsError, match="cannot read"):
         load_records(path)
+
+
+def _summary(rank: int, success: bool, part: str | None = "handle", task: float = 0.3) -> dict:
+    return {
+        "rank": rank,
+        "solved": True,
+        "success": success,
+        "part": part,
+        "quality": 0.2,
+        "task_quality": task,
+        "validated_as": rank,
+        "times": {"solve": 0.1, "validate": 0.5},
+    }
+
+
+def test_a_squeeze_retry_holds_where_the_deeper_squeeze_held():
+    """with_retry: a slip is judged by the deeper squeeze's verdict and costs its validation;
+    a hold stays as it is, and records that differ in more than the squeeze are refused."""
+    settings = PlannerSettings(max_proposals=3, max_candidates=3, pinch_proposals=0)
+    base = PairRecord("leap", "mug", 3, TEXT, "handle", False, False, False, False, 3, [], 0.0)
+    base.candidate_summaries = [_summary(0, False), _summary(1, False), _summary(2, True)]
+    deeper = replace(
+        base, candidate_summaries=[_summary(0, True), _summary(1, False), _summary(2, False)]
+    )
+    assert not replay_pair(base, settings).first_part_ok
+    (merged,) = with_retry([base], [deeper])
+    assert [c["success"] for c in merged.candidate_summaries] == [True, False, True]
+    assert [("retry" in c["times"]) for c in merged.candidate_summaries] == [True, True, False]
+    assert replay_pair(merged, settings).first_part_ok
+    assert base.candidate_summaries[0]["success"] is False  # the records themselves unchanged
+
+    solved_otherwise = replace(deeper, candidate_summaries=[_summary(0, True, task=0.9)])
+    with pytest.raises(RecordsError, match="solved differently"):
+        with_retry([base], [solved_otherwise])
+    with pytest.raises(RecordsError, match="same pairs"):
+        with_retry([base], [replace(deeper, instruction="Hold a mug by body")])
