@@ -293,13 +293,17 @@ def test_user_hand_pinch_proposals_must_be_a_count(tmp_path):
 
 def test_user_hand_retry_squeeze_depth_must_be_deeper(tmp_path):
     """A retry squeeze is optional (none where hand.json is silent) and deeper than the first."""
+    meta = json.loads((load_hand("allegro").folder / "hand.json").read_text())
+    meta.pop("retry_squeeze_depth", None)
+    silent = tmp_path / "silent"
+    shutil.copytree(load_hand("allegro").folder, silent)
+    (silent / "hand.json").write_text(json.dumps(meta))
+    assert load_hand(silent).meta.retry_squeeze_depth is None
     folder = tmp_path / "retry"
     shutil.copytree(load_hand("allegro").folder, folder)
-    meta = json.loads((folder / "hand.json").read_text())
-    assert load_hand("allegro").meta.retry_squeeze_depth is None  # hand.json is silent
     for bad in (meta["squeeze_depth"], 0.5, "3", True):
         (folder / "hand.json").write_text(json.dumps({**meta, "retry_squeeze_depth": bad}))
         with pytest.raises(HandError, match="retry_squeeze_depth must be null or a number above"):
             load_hand(folder)
-    (folder / "hand.json").write_text(json.dumps({**meta, "retry_squeeze_depth": 4}))
-    assert load_hand(folder).meta.retry_squeeze_depth == 4.0
+    (folder / "hand.json").write_text(json.dumps({**meta, "retry_squeeze_depth": 5}))
+    assert load_hand(folder).meta.retry_squeeze_depth == 5.0

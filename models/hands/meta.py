@@ -86,9 +86,10 @@ class HandMeta:
     pregrasp_clearance: float
     squeeze_depth: float
     # A second, deeper squeeze validated when a grasp slips at `squeeze_depth` (None: none).
-    # Parts far from the centre of mass (pump heads, mug handles) turn in LEAP's fingers at depth
-    # 1 and hold at depth 2, while depth 2 for every grasp loses others (docs/planner_log.md,
-    # "Squeeze retry").
+    # The built-in hands retry at twice their depth, a squeeze target 2 cm past the contact: on
+    # all-validated records it held parts far from the centre of mass (pump heads, mug handles)
+    # that turn in the fingers at the first squeeze, and lost no pair, where the deeper squeeze
+    # for every grasp loses others (docs/planner_log.md, "Squeeze retry").
     retry_squeeze_depth: float | None
     source: str  # where the kinematics come from (for provenance and vendor checks)
 
