@@ -167,14 +167,15 @@ def print_table(rows: list[dict]) -> None:
 
 
 def print_by_part(records: list[PairRecord]) -> None:
-    """Returned-grasp success per (category, part) and hand: where the planner fails."""
+    """Pairs held on the instructed part per (category, part) and hand: where the planner
+    fails (a grasp that held on another part counts as a failure here)."""
     hands = sorted({r.hand for r in records})
     print(f"{'category/part':<24}" + "".join(f"{h:>10}" for h in hands))
     for cat, part in sorted({(r.category, r.part) for r in records}):
         cells = []
         for hand in hands:
             rs = [r for r in records if (r.category, r.part, r.hand) == (cat, part, hand)]
-            cells.append(f"{sum(r.returned_holds for r in rs)}/{len(rs)}".rjust(10))
+            cells.append(f"{sum(r.part_ok for r in rs)}/{len(rs)}".rjust(10))
         print(f"{cat + '/' + part:<24}" + "".join(cells))
 
 
@@ -197,7 +198,9 @@ def main() -> None:
         help="planner setting overrides, e.g. solve_batch=2 program.major_iterations=60",
     )
     parser.add_argument(
-        "--by-part", action="store_true", help="also print returned success per category/part"
+        "--by-part",
+        action="store_true",
+        help="also print pairs held on the instructed part per category/part",
     )
     args = parser.parse_args()
     planner_settings(args.candidates, args.set)  # fail early on a bad override

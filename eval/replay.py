@@ -218,7 +218,9 @@ def main() -> None:
         metavar="FIELD=VALUE",
         help=f"policy settings: {', '.join(REPLAYABLE)}",
     )
-    parser.add_argument("--by-part", action="store_true", help="returned success per part")
+    parser.add_argument(
+        "--by-part", action="store_true", help="pairs held on the instructed part, per part"
+    )
     parser.add_argument(
         "--retry",
         type=Path,
