@@ -223,6 +223,13 @@ def test_cli_hands_json():
     hands = {h["name"]: h for h in json.loads(out.stdout)}
     assert {"shadow": 22, "allegro": 16, "leap": 16} == {n: h["dof"] for n, h in hands.items()}
     assert all(len(h["anchor_fingers"]) == 4 for h in hands.values())
+    for name, h in hands.items():  # the closing the planner validates with, from hand.json
+        meta = load_hand(name).meta
+        assert (h["squeeze_depth"], h["retry_squeeze_depth"], h["pinch_proposals"]) == (
+            meta.squeeze_depth,
+            meta.retry_squeeze_depth,
+            meta.pinch_proposals,
+        )
 
 
 def test_cli_unknown_hand_is_a_clear_error():

@@ -185,6 +185,11 @@ class HandModel:
             "anchor_fingers": list(self.meta.anchor_fingers),
             "links": len(self.link_names),
             "kp": self.meta.kp,
+            # how the planner closes this hand in validation, and its extra proposals
+            "pregrasp_clearance": self.meta.pregrasp_clearance,
+            "squeeze_depth": self.meta.squeeze_depth,
+            "retry_squeeze_depth": self.meta.retry_squeeze_depth,
+            "pinch_proposals": self.meta.pinch_proposals,
             "source": self.meta.source,
             "folder": str(self.folder),
         }

@@ -32,6 +32,13 @@ def run(args: argparse.Namespace) -> int:
         tips = ", ".join(f"{t['name']} ({t['link']})" for t in h["fingertips"])
         print(f"  fingertips:  {tips}")
         print(f"  anchors:     {', '.join(h['anchor_fingers'])}  (K = {len(h['anchor_fingers'])})")
+        retry = h["retry_squeeze_depth"]
+        print(
+            f"  closing:     pregrasp {1000 * h['pregrasp_clearance']:g} mm off, squeeze depth "
+            f"{h['squeeze_depth']:g}"
+            + ("" if retry is None else f", retried at {retry:g} after a slip")
+        )
+        print(f"  proposals:   {h['pinch_proposals']} pinch proposals after the regular ones")
         print("  joints:      name [lower, upper] rad, closing direction")
         for j in h["joints"]:
             close = {1: "+ closes", -1: "- closes", 0: "spreads"}[j["closing"]]
