@@ -82,7 +82,8 @@ class ProgramSettings:
     # `pregrasp_clearance` (default 1 cm)
     pregrasp_clearance: float | None = None
     # a deeper squeeze validated when a grasp slips at `squeeze_depth` (finish_grasp); None:
-    # the hand's hand.json `retry_squeeze_depth` (default none); 0: no retry
+    # the hand's hand.json `retry_squeeze_depth` (default none); 0, or any depth not deeper
+    # than the squeeze: no retry
     retry_squeeze_depth: float | None = None
 
     def __post_init__(self) -> None:
@@ -213,11 +214,13 @@ class GraspProgram:
 
     @property
     def retry_squeeze_depth(self) -> float | None:
-        """The deeper squeeze tried after a slip: the settings' (0: none), else the hand's."""
+        """The deeper squeeze tried after a slip: the settings', else the hand's; none where
+        that is not deeper than the squeeze (0 in the settings, or a squeeze depth set as deep),
+        since validating the same squeeze again gives the same verdict."""
         depth = self.settings.retry_squeeze_depth
         if depth is None:
-            return self.hand.meta.retry_squeeze_depth
-        return depth if depth > 0 else None
+            depth = self.hand.meta.retry_squeeze_depth
+        return depth if depth is not None and depth > self.squeeze_depth else None
 
     @property
     def pregrasp_clearance(self) -> float:

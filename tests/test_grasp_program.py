@@ -223,6 +223,9 @@ def test_settings_override_the_hands_closing(hand_name):
     assert retry.retry_squeeze_depth == 5.0
     none = grasp_program(hand, obj.collision_pieces(), ProgramSettings(retry_squeeze_depth=0))
     assert none.retry_squeeze_depth is None
+    # a squeeze set as deep as the hand's retry leaves nothing deeper to retry with
+    deep = ProgramSettings(squeeze_depth=hand.meta.retry_squeeze_depth or 9.0)
+    assert grasp_program(hand, obj.collision_pieces(), deep).retry_squeeze_depth is None
 
 
 def test_a_row_of_nan_anchors_leaves_that_finger_free(hand_name):
