@@ -107,6 +107,11 @@ def _vec(value, field: str, path: Path) -> np.ndarray:
     return arr
 
 
+def _finite_number(value) -> bool:
+    """A JSON number (not a boolean, which Python counts as an int) that is finite."""
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and np.isfinite(value)
+
+
 def read_meta(path: Path) -> HandMeta:
     """Read and check `hand.json`; raises HandError naming every missing field."""
     try:
@@ -152,14 +157,12 @@ def read_meta(path: Path) -> HandMeta:
     closing = {}
     for field, default in (("pregrasp_clearance", 0.01), ("squeeze_depth", 1.0)):
         value = raw.get(field, default)
-        number = isinstance(value, (int, float)) and not isinstance(value, bool)
-        if not number or not np.isfinite(value) or value <= 0:
+        if not _finite_number(value) or value <= 0:
             raise HandError(f"{path}: {field} must be a positive number, got {value!r}")
         closing[field] = float(value)
     retry = raw.get("retry_squeeze_depth")
     if retry is not None:
-        number = isinstance(retry, (int, float)) and not isinstance(retry, bool)
-        if not number or not np.isfinite(retry) or retry <= closing["squeeze_depth"]:
+        if not _finite_number(retry) or retry <= closing["squeeze_depth"]:
             raise HandError(
                 f"{path}: retry_squeeze_depth must be null or a number above squeeze_depth "
                 f"({closing['squeeze_depth']}), got {retry!r}"
