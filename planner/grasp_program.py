@@ -335,8 +335,8 @@ class GraspProgram:
         start = time.perf_counter()
         wrist0 = rounded(_normalize_wrist(targets.wrist))
         # every input rounded (models.reproducible), whoever built the targets
-        q0 = rounded_within(targets.q, self.hand.lower, self.hand.upper)
-        self.hand.check_joints(q0, "initial joints")
+        self.hand.check_joints(np.asarray(targets.q), "initial joints")
+        q0 = rounded_within(self.hand.couple(targets.q), self.hand.lower, self.hand.upper)
         plant, world = self.plant, self.plant.world_frame()
         ik = InverseKinematics(plant, self.plant_context, with_joint_limits=True)
         prog, qvar = ik.prog(), ik.q()
@@ -390,6 +390,9 @@ class GraspProgram:
                 s.wrist_rotation_weight,
             )
         prog.AddQuadraticErrorCost(s.joint_prior_weight * np.eye(len(joints)), q0, qvar[joints])
+        couplings = self.hand.coupling_equalities  # joints one actuator drives (hand.json)
+        if len(couplings):
+            prog.AddLinearEqualityConstraint(couplings, np.zeros(len(couplings)), qvar[joints])
         ik.AddMinimumDistanceLowerBoundConstraint(s.min_distance, s.influence_distance)
         if self._self_context is not None:
             prog.AddConstraint(
@@ -409,7 +412,8 @@ class GraspProgram:
             [x[start_wrist + 4 : start_wrist + 7], x[start_wrist : start_wrist + 4]]
         )
         wrist = rounded(_normalize_wrist(wrist))
-        q = rounded_within(x[joints], self.hand.lower, self.hand.upper)
+        # exactly on the couplings (the solver meets the equalities to its tolerance only)
+        q = rounded_within(self.hand.couple(x[joints]), self.hand.lower, self.hand.upper)
         distance = self.hand_object_distance(wrist, q)
         anchor_err = (
             0.0
@@ -489,13 +493,24 @@ class GraspProgram:
                 step = -(j.T @ forces[i])
             else:  # the fingertip straight back along its normal (damped least squares)
                 step = j.T @ np.linalg.solve(j @ j.T + 1e-4 * np.eye(3), normals[i])
-            delta[cols] += step
+            full = np.zeros(self.hand.dof)
+            full[cols] = step
+            full = self._coupled_step(full)  # joints one actuator drives move together
+            delta += full
             moved[cols] = True
-            backoff.append(float(normals[i] @ (j @ step)))
+            backoff.append(float(normals[i] @ (jac @ full)))
         delta *= clearance / max(float(np.mean(backoff)), 1e-9)
         rest = ~moved
         delta[rest] = 0.3 * (self.hand.open_pose[rest] - q[rest])
         return self.clear_of_object(wrist, q, delta, moved)
+
+    def _coupled_step(self, step: np.ndarray) -> np.ndarray:
+        """A joint offset moved onto the hand's couplings (least squares): the step a tendon
+        shared by two joints can make (models.hands.HandModel.coupling_basis)."""
+        if not self.hand.meta.couplings:
+            return step
+        basis = self.hand.coupling_basis
+        return basis @ (np.linalg.pinv(basis) @ step)
 
     def clear_of_object(
         self, wrist: np.ndarray, q: np.ndarray, delta: np.ndarray, anchor_joints: np.ndarray

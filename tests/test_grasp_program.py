@@ -57,6 +57,21 @@ def test_mug_handle_solve_reaches_anchors_without_penetration(hand_name):
     assert any(r.ok for r in results), [r.message for r in results]
 
 
+def test_grasp_pregrasp_and_squeeze_keep_the_couplings(hand_name):
+    """What one tendon drives (ShadowHand's J1/J2) stays in its plan ratio in every phase the
+    validator executes, even from an initial guess that breaks it."""
+    hand = load_hand(hand_name)
+    obj = make_object("mug", 3)
+    program = grasp_program(hand, obj.collision_pieces())
+    p = FunctionalPlanner(hand).propose(obj, "handle")[0]
+    guess = np.random.default_rng(1).uniform(hand.lower, hand.upper)
+    r = program.solve(GraspTargets(p.wrist, guess, p.anchors, p.normals, palm_target=p.palm_target))
+    nearest = [int(np.argmin(np.linalg.norm(obj.points - a, axis=1))) for a in p.anchors]
+    pre = program.pregrasp(r.wrist, r.q, obj.normals[nearest])
+    for q in (r.q, pre, program.squeeze(r.q, pre), program.squeeze(r.q, pre, 2.0)):
+        assert hand.coupling_violation(q) < 1e-9
+
+
 def test_hand_hand_pairs_are_a_constraint_of_their_own(hand_name):
     """The main context sees only hand-object pairs, the second only hand-hand pairs, and the
     answers keep the fingers out of each other as well as out of the object."""

@@ -187,7 +187,55 @@ def test_user_hand_loads_from_folder(tmp_path, hand_name):
     (folder / "hand.json").write_text(json.dumps(meta))
     mine = load_hand(folder)
     assert mine.name == "myhand" and mine.dof == builtin.dof
-    assert mine.mujoco_spec().compile().nu == builtin.dof
+    assert mine.mujoco_spec().compile().nu == len(builtin.actuators())
+
+
+def test_coupled_joints_share_one_actuator(hand_name):
+    """Each coupling is one tendon actuator; the rest one actuator per joint; the projection
+    onto the couplings keeps the plan ratio within limits."""
+    hand = load_hand(hand_name)
+    model = hand.mujoco_spec().compile()
+    coupled = sum(len(c.joints) for c in hand.meta.couplings)
+    assert model.nu == hand.dof - coupled + len(hand.meta.couplings)
+    assert model.ntendon == len(hand.meta.couplings)
+    q = np.random.default_rng(0).uniform(hand.lower, hand.upper, size=(5, hand.dof))
+    projected = hand.couple(q)
+    assert hand.coupling_violation(projected) < 1e-12
+    assert np.all(projected >= hand.lower) and np.all(projected <= hand.upper)
+    assert np.allclose(hand.couple(projected), projected)
+
+
+def test_shadow_couples_j1_j2_like_menagerie():
+    """ShadowHand: J1 and J2 of FF, MF, RF, LF ride one tendon each (Menagerie: 18 actuators
+    for 22 joints); the thumb's joints are independent."""
+    hand = load_hand("shadow")
+    pairs = {tuple(sorted(c.joints)) for c in hand.meta.couplings}
+    assert pairs == {(f"rh_{f}J1", f"rh_{f}J2") for f in ("FF", "MF", "RF", "LF")}
+    assert len(hand.actuators()) == 18
+
+
+@pytest.mark.parametrize(
+    "coupling, message",
+    [
+        ({"name": "x", "joints": ["nope", "nope2"], "tendon": [1, 1]}, "not in joint_order"),
+        ({"name": "x", "joints": ["J1"], "tendon": [1]}, "2 or more"),
+        ({"name": "x", "joints": ["J1", "J2"], "tendon": [1]}, "1 values for 2 joints"),
+        ({"name": "x", "joints": ["J1", "J2"], "tendon": [1, 1], "plan_ratio": [0, 1]}, "non-zero"),
+        ({"joints": ["J1", "J2"]}, "must be an object"),
+    ],
+)
+def test_bad_coupling_is_named(tmp_path, coupling, message):
+    folder = tmp_path / "bad"
+    shutil.copytree(load_hand("allegro").folder, folder)
+    meta = json.loads((folder / "hand.json").read_text())
+    names = meta["joint_order"]
+    coupling = json.loads(
+        json.dumps(coupling).replace('"J1"', f'"{names[1]}"').replace('"J2"', f'"{names[2]}"')
+    )
+    meta["couplings"] = [coupling]
+    (folder / "hand.json").write_text(json.dumps(meta))
+    with pytest.raises(HandError, match=message):
+        load_hand(folder)
 
 
 def test_user_hand_missing_metadata_names_fields(tmp_path):

@@ -51,6 +51,19 @@ class Palm:
 
 
 @dataclass(frozen=True)
+class Coupling:
+    """Joints the maker drives together, e.g. ShadowHand's J1 and J2 of a finger, pulled by one
+    tendon. In simulation one position actuator drives the fixed tendon sum(tendon_i x q_i);
+    the planner keeps the joints in the fixed ratio q_i / plan_ratio_i (BODex plans J1 = J2),
+    so it never asks for a configuration the one actuator cannot hold."""
+
+    name: str
+    joints: tuple[str, ...]
+    tendon: np.ndarray  # coefficient of each joint in the tendon length
+    plan_ratio: np.ndarray  # the planner keeps q_i proportional to these
+
+
+@dataclass(frozen=True)
 class HandMeta:
     name: str
     urdf: str
@@ -92,6 +105,8 @@ class HandMeta:
     # for every grasp loses others (docs/planner_log.md, "Squeeze retry").
     retry_squeeze_depth: float | None
     source: str  # where the kinematics come from (for provenance and vendor checks)
+    # Joints driven together by one actuator (empty: one position actuator per joint).
+    couplings: tuple[Coupling, ...] = ()
 
     def fingertip(self, name: str) -> Fingertip:
         for tip in self.fingertips:
@@ -168,6 +183,7 @@ def read_meta(path: Path) -> HandMeta:
                 f"({closing['squeeze_depth']}), got {retry!r}"
             )
         retry = float(retry)
+    couplings = _couplings(raw.get("couplings", []), joints, raw["open_pose"], path)
     return HandMeta(
         name=raw["name"],
         urdf=raw["urdf"],
@@ -195,4 +211,60 @@ def read_meta(path: Path) -> HandMeta:
         **closing,
         retry_squeeze_depth=retry,
         source=raw.get("source", ""),
+        couplings=couplings,
     )
+
+
+def _couplings(raw, joints: tuple[str, ...], open_pose, path: Path) -> tuple[Coupling, ...]:
+    """Check the `couplings` field: each names 2+ distinct joints of the hand (no joint in two
+    couplings), with one finite tendon coefficient and one non-zero plan ratio per joint, and
+    the open pose must keep the plan ratio (the planner starts from it)."""
+    example = (
+        '[{"name": "FFJ0", "joints": ["FFJ2", "FFJ1"], "tendon": [1, 1], "plan_ratio": [1, 1]}]'
+    )
+    if not isinstance(raw, list):
+        raise HandError(f"{path}: couplings must be a list like {example}; got {raw!r}")
+    out, seen = [], set()
+    for i, entry in enumerate(raw):
+        if not isinstance(entry, dict) or not {"name", "joints", "tendon"} <= set(entry):
+            raise HandError(
+                f"{path}: couplings[{i}] must be an object with name, joints, tendon "
+                f"(and optional plan_ratio), like {example}; got {entry!r}"
+            )
+        names = entry["joints"]
+        if (
+            not isinstance(names, list)
+            or len(names) < 2
+            or not all(isinstance(n, str) for n in names)
+        ):
+            raise HandError(f"{path}: couplings[{i}].joints must list 2 or more joint names")
+        unknown = [n for n in names if n not in joints]
+        if unknown:
+            raise HandError(f"{path}: couplings[{i}] names joints not in joint_order: {unknown}")
+        repeated = [n for n in names if n in seen] + [n for n in set(names) if names.count(n) > 1]
+        if repeated:
+            raise HandError(f"{path}: joints {sorted(set(repeated))} are in two couplings")
+        seen.update(names)
+        ratio_raw = entry.get("plan_ratio", entry["tendon"])
+        arrays = {}
+        for field, value in (("tendon", entry["tendon"]), ("plan_ratio", ratio_raw)):
+            if not isinstance(value, list) or not all(_finite_number(v) for v in value):
+                raise HandError(f"{path}: couplings[{i}].{field} must be a list of numbers")
+            if len(value) != len(names):
+                raise HandError(
+                    f"{path}: couplings[{i}].{field} has {len(value)} values for "
+                    f"{len(names)} joints"
+                )
+            arrays[field] = np.asarray(value, dtype=float)
+        if np.any(arrays["plan_ratio"] == 0) or not np.any(arrays["tendon"] != 0):
+            raise HandError(
+                f"{path}: couplings[{i}] needs non-zero plan_ratio values and a non-zero tendon"
+            )
+        opened = np.array([float(open_pose[n]) for n in names]) / arrays["plan_ratio"]
+        if np.ptp(opened) > 1e-9:
+            raise HandError(
+                f"{path}: open_pose breaks couplings[{i}] ({entry['name']}): its joints "
+                f"{names} must be in the ratio {ratio_raw}"
+            )
+        out.append(Coupling(str(entry["name"]), tuple(names), **arrays))
+    return tuple(out)

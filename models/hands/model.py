@@ -50,6 +50,15 @@ class HandModel:
         for a, b in self.meta.ignore_collision_pairs:
             if a not in links or b not in links:
                 raise HandError(f"{self.folder}: ignore_collision_pairs names unknown link {a}/{b}")
+        for c in self.meta.couplings:
+            by_name = {j.name: j for j in self.tree.joints.values()}
+            lows = np.array([by_name[n].lower for n in c.joints]) / c.plan_ratio
+            highs = np.array([by_name[n].upper for n in c.joints]) / c.plan_ratio
+            if np.ptp(np.minimum(lows, highs)) > 1e-9 or np.ptp(np.maximum(lows, highs)) > 1e-9:
+                raise HandError(
+                    f"{self.folder}: coupling {c.name}: the limits of {list(c.joints)} must be "
+                    "in the plan ratio, so that clipping to them keeps the coupling"
+                )
         for link in self.meta.program_hull_links:
             boxes = sum(g.kind == "box" for g in self.tree.geoms.get(link, []))
             if boxes < 2:
@@ -101,6 +110,53 @@ class HandModel:
     @cached_property
     def closing_direction(self) -> np.ndarray:
         return np.array([self.meta.closing_direction[n] for n in self.joint_names], dtype=float)
+
+    @cached_property
+    def coupling_basis(self) -> np.ndarray:
+        """(dof, m): every joint configuration the planner may use is basis @ s. One column per
+        free joint and one per coupling (its plan ratios), so J1 = J2 for a ShadowHand finger."""
+        index = {n: i for i, n in enumerate(self.joint_names)}
+        coupled = {n for c in self.meta.couplings for n in c.joints}
+        columns = []
+        for name in self.joint_names:
+            if name not in coupled:
+                col = np.zeros(self.dof)
+                col[index[name]] = 1.0
+                columns.append(col)
+        for coupling in self.meta.couplings:
+            col = np.zeros(self.dof)
+            col[[index[n] for n in coupling.joints]] = coupling.plan_ratio
+            columns.append(col)
+        return np.stack(columns, axis=1)
+
+    @cached_property
+    def coupling_equalities(self) -> np.ndarray:
+        """(k, dof) A with A @ q = 0 exactly when q keeps every coupling's plan ratio."""
+        index = {n: i for i, n in enumerate(self.joint_names)}
+        rows = []
+        for c in self.meta.couplings:
+            first = index[c.joints[0]]
+            for name, ratio in zip(c.joints[1:], c.plan_ratio[1:], strict=True):
+                row = np.zeros(self.dof)
+                row[first], row[index[name]] = ratio, -c.plan_ratio[0]
+                rows.append(row)
+        return np.array(rows).reshape(len(rows), self.dof)
+
+    def couple(self, q: np.ndarray) -> np.ndarray:
+        """q (..., dof) moved to the nearest configuration that keeps the couplings (least
+        squares), within the joint limits; q itself for a hand without couplings."""
+        q = np.asarray(q, dtype=float)
+        if not self.meta.couplings:
+            return q
+        basis = self.coupling_basis
+        coupled = q @ np.linalg.pinv(basis).T @ basis.T
+        return np.clip(coupled, self.lower, self.upper)
+
+    def coupling_violation(self, q: np.ndarray) -> float:
+        """Largest |A @ q| (rad): 0 for a configuration the hand's actuators can hold."""
+        if not self.meta.couplings:
+            return 0.0
+        return float(np.max(np.abs(np.asarray(q, dtype=float) @ self.coupling_equalities.T)))
 
     def check_joints(self, q: np.ndarray | torch.Tensor, what: str = "joint vector") -> None:
         """Raise HandError unless q has shape (..., dof) and finite values."""
@@ -170,6 +226,21 @@ class HandModel:
 
         return hand_spec(self)
 
+    def actuators(self) -> list[dict]:
+        """The position actuators MuJoCo gets: one per uncoupled joint, one per coupling
+        (driving its tendon). {"name", "joints", "tendon" coefficients}."""
+        coupled = {n for c in self.meta.couplings for n in c.joints}
+        out = [
+            {"name": n, "joints": [n], "tendon": [1.0]}
+            for n in self.joint_names
+            if n not in coupled
+        ]
+        out += [
+            {"name": c.name, "joints": list(c.joints), "tendon": c.tendon.tolist()}
+            for c in self.meta.couplings
+        ]
+        return out
+
     def describe(self) -> dict:
         """Plain-data summary (what `drograsp hands --json` prints)."""
         return {
@@ -185,6 +256,16 @@ class HandModel:
             "anchor_fingers": list(self.meta.anchor_fingers),
             "links": len(self.link_names),
             "kp": self.meta.kp,
+            "actuators": self.actuators(),
+            "couplings": [
+                {
+                    "name": c.name,
+                    "joints": list(c.joints),
+                    "tendon": c.tendon.tolist(),
+                    "plan_ratio": c.plan_ratio.tolist(),
+                }
+                for c in self.meta.couplings
+            ],
             # how the planner closes this hand in validation, and its extra proposals
             "pregrasp_clearance": self.meta.pregrasp_clearance,
             "squeeze_depth": self.meta.squeeze_depth,

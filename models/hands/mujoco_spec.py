@@ -5,6 +5,7 @@ is no second model file to keep in sync."""
 from __future__ import annotations
 
 import mujoco
+import numpy as np
 
 WRIST_MOCAP = "wrist_mocap"
 WRIST_JOINT = "wrist_free"
@@ -17,8 +18,8 @@ def actuator_name(joint: str) -> str:
 
 def hand_spec(hand) -> mujoco.MjSpec:
     """A fresh spec: mocap body `wrist_mocap`, root body with free joint `wrist_free` welded
-    to it (`wrist_weld`), one position actuator `<joint>_act` per joint (kp from hand.json,
-    ctrlrange = joint limits), joint damping/armature/friction loss from hand.json, and the
+    to it (`wrist_weld`), one position actuator `<joint>_act` per joint, or per coupling
+    `<coupling>_act` on its fixed tendon (kp from hand.json, ctrlrange from the joint limits), joint damping/armature/friction loss from hand.json, and the
     hand.json contact exclusions."""
     spec = mujoco.MjSpec.from_file(str(hand.urdf_path))
     spec.compiler.fusestatic = False
@@ -42,12 +43,28 @@ def hand_spec(hand) -> mujoco.MjSpec:
         spec_joint.damping[0] = meta.joint_damping  # MuJoCo 4: [linear, ...] coefficients
         spec_joint.armature = meta.joint_armature
         spec_joint.frictionloss = meta.joint_frictionloss
-    for joint, lo, hi in zip(hand.joint_names, hand.lower, hand.upper, strict=True):
-        act = spec.add_actuator(
-            name=actuator_name(joint), target=joint, trntype=mujoco.mjtTrn.mjTRN_JOINT
+    lower = dict(zip(hand.joint_names, hand.lower, strict=True))
+    upper = dict(zip(hand.joint_names, hand.upper, strict=True))
+    for actuated in hand.actuators():
+        joints, coefs = actuated["joints"], np.asarray(actuated["tendon"])
+        if len(joints) == 1:
+            act = spec.add_actuator(
+                name=actuator_name(joints[0]), target=joints[0], trntype=mujoco.mjtTrn.mjTRN_JOINT
+            )
+        else:  # a coupling: one position actuator on the fixed tendon sum(coef x q)
+            tendon = spec.add_tendon(name=actuated["name"])
+            for joint, coef in zip(joints, coefs, strict=True):
+                tendon.wrap_joint(joint, float(coef))
+            act = spec.add_actuator(
+                name=actuator_name(actuated["name"]),
+                target=actuated["name"],
+                trntype=mujoco.mjtTrn.mjTRN_TENDON,
+            )
+        ends = np.array(
+            [[lower[j] * c, upper[j] * c] for j, c in zip(joints, coefs, strict=True)]
         )
         act.set_to_position(kp=meta.kp, kv=meta.kv)
-        act.ctrlrange = [lo, hi]
+        act.ctrlrange = [float(ends.min(axis=1).sum()), float(ends.max(axis=1).sum())]
         act.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
         if meta.force_range > 0:
             act.forcerange = [-meta.force_range, meta.force_range]
