@@ -60,9 +60,7 @@ def hand_spec(hand) -> mujoco.MjSpec:
                 target=actuated["name"],
                 trntype=mujoco.mjtTrn.mjTRN_TENDON,
             )
-        ends = np.array(
-            [[lower[j] * c, upper[j] * c] for j, c in zip(joints, coefs, strict=True)]
-        )
+        ends = np.array([[lower[j] * c, upper[j] * c] for j, c in zip(joints, coefs, strict=True)])
         act.set_to_position(kp=meta.kp, kv=meta.kv)
         act.ctrlrange = [float(ends.min(axis=1).sum()), float(ends.max(axis=1).sum())]
         act.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
