@@ -86,6 +86,9 @@ def _summary(rows: dict[str, np.ndarray], results: list, wall: float, preset: st
         "success_rate": float(ok.mean()) if len(ok) else 0.0,
         "successes": int(ok.sum()),
         "pregrasp_penetration_failures": sum(r.reason == "pregrasp_penetration" for r in results),
+        "pregrasp_self_penetration_failures": sum(
+            r.reason == "pregrasp_self_penetration" for r in results
+        ),
         "unstable_simulations": sum(any("unstable" in w for w in r.warnings) for r in results),
         "mean_translation_m": float(np.mean([r.translation for r in tested])) if tested else None,
         "mean_rotation_deg": float(np.mean([r.rotation_deg for r in tested])) if tested else None,

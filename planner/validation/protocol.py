@@ -59,6 +59,9 @@ class Protocol:
     max_translation: float = 0.05  # m
     max_rotation_deg: float = 15.0
     max_pregrasp_penetration: float = 0.01  # m; deeper hand-object penetration fails at once
+    # m; deeper hand-hand penetration at the pregrasp fails at once too: the deepest contact
+    # MuJoCo generates between two hand geoms (its exclusions and parent-child filter apply)
+    max_pregrasp_self_penetration: float = 0.01
     # Static metrics at the grasp (not part of the verdict).
     contact_margin: float = 0.01
     contact_threshold: float = 0.002

@@ -44,11 +44,12 @@ class ValidationResult:
     """Verdict and measurements of one grasp."""
 
     success: bool
-    reason: str  # "held", "pregrasp_penetration", or "slipped"
+    reason: str  # "held", "pregrasp_penetration", "pregrasp_self_penetration", or "slipped"
     directions: list[DirectionResult] = field(default_factory=list)
     translation: float = 0.0  # m, worst over the directions tested
     rotation_deg: float = 0.0  # worst over the directions tested
     pregrasp_penetration: float = 0.0  # m, deepest hand-object penetration at the pregrasp
+    pregrasp_self_penetration: float = 0.0  # m, deepest hand-hand penetration at the pregrasp
     grasp_penetration: float = 0.0  # m, same at the grasp configuration
     contact_count: int = 0  # hand bodies within the contact threshold at the grasp
     object_mass: float = 0.0  # kg, as compiled
@@ -123,6 +124,21 @@ def _hand_object_contacts(scene: Scene, data: mujoco.MjData) -> tuple[list[float
             dists.append(float(c.dist))
             bodies.append(b2)
     return dists, bodies
+
+
+def _self_penetration(scene: Scene, data: mujoco.MjData) -> float:
+    """Deepest penetration (m, >= 0) of the contacts MuJoCo generated between two hand geoms.
+
+    DexGraspBench's measure: data.contact after mj_forward, so the model's contype/conaffinity,
+    <exclude> pairs and parent-child filter decide which pairs count.
+    """
+    m = scene.model
+    deepest = 0.0
+    for i in range(data.ncon):
+        c = data.contact[i]
+        if scene.hand_body[m.geom_bodyid[c.geom1]] and scene.hand_body[m.geom_bodyid[c.geom2]]:
+            deepest = max(deepest, -float(c.dist))
+    return deepest
 
 
 def _grasp_contacts(
@@ -336,7 +352,14 @@ def _validate(
     mujoco.mj_forward(m, d)
     dists, _ = _hand_object_contacts(scene, d)
     result.pregrasp_penetration = max(0.0, -min(dists, default=0.0))
+    # DexGraspBench fails a grasp over either limit; both are measured, and a grasp over both
+    # is reported as pregrasp_penetration
+    result.pregrasp_self_penetration = _self_penetration(scene, d)
     if result.pregrasp_penetration > proto.max_pregrasp_penetration:
+        result.wall_time = time.perf_counter() - start
+        return result
+    if result.pregrasp_self_penetration > proto.max_pregrasp_self_penetration:
+        result.reason = "pregrasp_self_penetration"
         result.wall_time = time.perf_counter() - start
         return result
 
