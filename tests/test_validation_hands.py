@@ -29,7 +29,8 @@ def test_scene_follows_the_hand_contract(name):
     scene = get_scene(adapter, as_collision_object([CUBE], name="cube"), SHORT)
     m = scene.model
     assert adapter.dof == hands_module.load_hand(name).dof == len(scene.joint_qpos)
-    assert m.nu >= adapter.dof and m.nmocap == 1
+    # one actuator per joint or per coupling (ShadowHand's J1/J2 tendons)
+    assert m.nu == len(hands_module.load_hand(name).actuators()) and m.nmocap == 1
     assert m.opt.timestep == SHORT.timestep and m.opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC
     assert scene.object_mass == pytest.approx(SHORT.object_mass, rel=1e-6)
     assert scene.hand_body.sum() >= adapter.dof // 4  # the hand's links, not the object
