@@ -301,11 +301,78 @@ def _xml_index(
     return out
 
 
+def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Hamilton product of quaternions wxyz."""
+    aw, ax, ay, az = a
+    bw, bx, by, bz = b
+    return np.array(
+        [
+            aw * bw - ax * bx - ay * by - az * bz,
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+        ]
+    )
+
+
+def _quat_rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """v rotated by the unit quaternion q (wxyz)."""
+    w, u = q[0], q[1:]
+    return v + 2.0 * np.cross(u, np.cross(u, v) + w * v)
+
+
+def root_offset_pose(root_offset: Any) -> np.ndarray:
+    """`root_offset` (a 4x4 rigid transform, or xyz + quaternion wxyz) as a 7-vector with a
+    unit quaternion; GraspError unless it is a finite rigid transform."""
+    try:
+        arr = np.asarray(root_offset, dtype=np.float64)
+    except (TypeError, ValueError) as err:
+        raise GraspError(f"root_offset: not numeric ({err})") from None
+    if arr.shape == (4, 4):
+        if not np.all(np.isfinite(arr)):
+            raise GraspError("root_offset: contains NaN or infinite values")
+        rot = arr[:3, :3]
+        if (
+            not np.allclose(rot.T @ rot, np.eye(3), atol=1e-6)
+            or np.linalg.det(rot) < 0
+            or not np.allclose(arr[3], [0.0, 0.0, 0.0, 1.0])
+        ):
+            raise GraspError("root_offset: the 4x4 matrix is not a rigid transform")
+        from scipy.spatial.transform import Rotation
+
+        quat = Rotation.from_matrix(rot).as_quat(scalar_first=True)
+        return np.concatenate([arr[:3, 3], quat])
+    if arr.shape == (ROOT_SIZE,):
+        return np.concatenate(
+            [_vector(arr[:3], "root_offset xyz", 3), _quaternion(arr[3:], "root_offset quaternion")]
+        )
+    raise GraspError(
+        f"root_offset: expected a 4x4 transform or 7 values (xyz + wxyz), got shape {arr.shape}"
+    )
+
+
+def _compose(pose: np.ndarray, offset: np.ndarray) -> np.ndarray:
+    """Pose (7) followed by offset (7): the offset's frame in the world, given `pose`'s.
+
+    The product quaternion is left unnormalized (Grasp normalizes), so an identity offset
+    returns `pose` bit for bit.
+    """
+    rot = pose[3:] / np.linalg.norm(pose[3:])
+    pos = pose[:3] + _quat_rotate(rot, offset[:3])
+    return np.concatenate([pos, _quat_mul(pose[3:], offset[3:])])
+
+
+def _inverse(pose: np.ndarray) -> np.ndarray:
+    conj = pose[3:] * np.array([1.0, -1.0, -1.0, -1.0])
+    return np.concatenate([-_quat_rotate(conj, pose[:3]), conj])
+
+
 def from_dexgraspbench(
     pregrasp_qpos: Any,
     grasp_qpos: Any,
     squeeze_qpos: Any,
     *,
+    root_offset: Any,
     hand: str,
     joint_names: Sequence[str],
     xml_joint_names: Sequence[str],
@@ -314,24 +381,35 @@ def from_dexgraspbench(
 ) -> Grasp:
     """A Grasp from DexGraspBench's per-grasp rows (7 root values, then the XML's joints).
 
-    `joint_map` maps grasp joint names to XML joint names where they differ.
+    The rows' root is the hand file's root frame; `root_offset` is that frame in the hand's
+    root link frame (4x4 or xyz + wxyz; `models.hands.mjcf_frame.mjcf_root_offset` computes
+    it from the files), so the Grasp's wrist poses are those of the root link. Pass the
+    identity (`np.eye(4)`) to keep the rows' root as the wrist, e.g. for a grasp that will be
+    simulated with the hand file itself. `joint_map` maps grasp joint names to XML joint
+    names where they differ.
     """
+    back = _inverse(root_offset_pose(root_offset))
     idx = _xml_index(joint_names, xml_joint_names, joint_map)
     rows = {}
     for phase, row in zip(PHASES, (pregrasp_qpos, grasp_qpos, squeeze_qpos), strict=True):
         rows[phase] = _vector(row, f"{phase}_qpos", ROOT_SIZE + len(xml_joint_names))
-    grasp_root, pre_root, sq_root = rows["grasp"][:7], rows["pregrasp"][:7], rows["squeeze"][:7]
+    wrist = {}
+    for phase in PHASES:
+        root = rows[phase][:ROOT_SIZE]
+        if np.linalg.norm(root[3:]) < 1e-8:
+            raise GraspError(f"{phase}_qpos: zero root quaternion (expected w, x, y, z)")
+        wrist[phase] = _compose(root, back)
     return Grasp(
         hand=hand,
-        wrist_pos=grasp_root[:3],
-        wrist_quat=grasp_root[3:],
+        wrist_pos=wrist["grasp"][:3],
+        wrist_quat=wrist["grasp"][3:],
         grasp=rows["grasp"][ROOT_SIZE:][idx],
         pregrasp=rows["pregrasp"][ROOT_SIZE:][idx],
         squeeze=rows["squeeze"][ROOT_SIZE:][idx],
-        pregrasp_wrist_pos=pre_root[:3],
-        pregrasp_wrist_quat=pre_root[3:],
-        squeeze_wrist_pos=sq_root[:3],
-        squeeze_wrist_quat=sq_root[3:],
+        pregrasp_wrist_pos=wrist["pregrasp"][:3],
+        pregrasp_wrist_quat=wrist["pregrasp"][3:],
+        squeeze_wrist_pos=wrist["squeeze"][:3],
+        squeeze_wrist_quat=wrist["squeeze"][3:],
         joint_names=tuple(joint_names),
         **kwargs,
     )
@@ -340,12 +418,19 @@ def from_dexgraspbench(
 def to_dexgraspbench(
     grasp: Grasp,
     *,
+    root_offset: Any,
     xml_joint_names: Sequence[str],
     joint_names: Sequence[str] | None = None,
     joint_map: Mapping[str, str] | None = None,
     fill: float = 0.0,
 ) -> dict[str, np.ndarray]:
-    """DexGraspBench rows {pregrasp,grasp,squeeze}_qpos for `grasp`; unmapped XML joints = fill."""
+    """DexGraspBench rows {pregrasp,grasp,squeeze}_qpos for `grasp`; unmapped XML joints = fill.
+
+    Each row's root is the hand file's root frame in the world: the grasp's wrist pose (of the
+    hand's root link) composed with `root_offset`, the file's root frame in the root link frame
+    (4x4 or xyz + wxyz; see `from_dexgraspbench`).
+    """
+    offset = root_offset_pose(root_offset)
     names = tuple(joint_names or grasp.joint_names or ())
     if not names:
         raise GraspError("to_dexgraspbench needs the grasp's joint names")
@@ -354,7 +439,7 @@ def to_dexgraspbench(
     out = {}
     for phase in PHASES:
         row = np.full(ROOT_SIZE + len(xml_joint_names), fill, dtype=np.float64)
-        row[:ROOT_SIZE] = grasp.wrist_pose(phase)
+        row[:ROOT_SIZE] = _compose(grasp.wrist_pose(phase), offset)
         row[ROOT_SIZE:][idx] = grasp.joints(phase)
         out[f"{phase}_qpos"] = row
     return out

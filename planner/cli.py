@@ -20,6 +20,7 @@ COMMANDS: tuple[str, ...] = (
     "plan",
     "view",
     "validate",
+    "export",
     "hands",
     "objects",
     "jobs",

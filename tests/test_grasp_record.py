@@ -104,18 +104,25 @@ def test_unknown_fields_and_bad_files(tmp_path):
         make_grasp().save(tmp_path / "g.txt")
 
 
+IDENTITY = np.eye(4)
+# a toy hand file whose root frame is 3 cm along the root link's z axis and turned 90 degrees
+# about its x axis
+OFFSET = np.array([0.0, 0.0, 0.03, np.sqrt(0.5), np.sqrt(0.5), 0.0, 0.0])
+
+
 def test_dexgraspbench_layout_round_trip_with_joint_map():
     xml = ("x_j2", "x_j0", "x_j3", "x_j1", "x_extra")
     joint_map = {n: f"x_{n}" for n in NAMES}
     g = make_grasp()
-    rows = to_dexgraspbench(g, xml_joint_names=xml, joint_map=joint_map)
+    rows = to_dexgraspbench(g, root_offset=IDENTITY, xml_joint_names=xml, joint_map=joint_map)
     assert rows["grasp_qpos"].shape == (7 + len(xml),)
-    np.testing.assert_allclose(rows["grasp_qpos"][:7], g.wrist_pose("grasp"))
+    np.testing.assert_array_equal(rows["grasp_qpos"][:7], g.wrist_pose("grasp"))
     np.testing.assert_allclose(rows["grasp_qpos"][7:], [0.3, 0.1, 0.4, 0.2, 0.0])
     back = from_dexgraspbench(
         rows["pregrasp_qpos"],
         rows["grasp_qpos"],
         rows["squeeze_qpos"],
+        root_offset=IDENTITY,
         hand="toy",
         joint_names=NAMES,
         xml_joint_names=xml,
@@ -123,18 +130,71 @@ def test_dexgraspbench_layout_round_trip_with_joint_map():
     )
     for phase in ("pregrasp", "grasp", "squeeze"):
         np.testing.assert_allclose(back.joints(phase), g.joints(phase))
-        np.testing.assert_allclose(back.wrist_pose(phase), g.wrist_pose(phase))
+        np.testing.assert_array_equal(back.wrist_pose(phase), g.wrist_pose(phase))
+
+
+@pytest.mark.parametrize("as_matrix", [False, True])
+def test_dexgraspbench_root_offset_moves_every_phase_and_round_trips(as_matrix):
+    """Rows hold the hand file's root frame: wrist pose composed with the offset, per phase."""
+    from scipy.spatial.transform import Rotation
+
+    offset = OFFSET
+    if as_matrix:
+        offset = np.eye(4)
+        offset[:3, :3] = Rotation.from_quat(OFFSET[3:], scalar_first=True).as_matrix()
+        offset[:3, 3] = OFFSET[:3]
+    g = make_grasp(wrist_quat=[0.0, 0.0, 1.0, 0.0])  # wrist turned 180 degrees about y
+    rows = to_dexgraspbench(g, root_offset=offset, xml_joint_names=NAMES)
+    # grasp: root 3 cm along the wrist's z, which is the world's -z
+    np.testing.assert_allclose(rows["grasp_qpos"][:3], [0.1, 0.2, 0.27], atol=1e-12)
+    # pregrasp wrist turned 180 degrees about x: its z is the world's -z as well
+    np.testing.assert_allclose(rows["pregrasp_qpos"][:3], [0.1, 0.2, 0.32], atol=1e-12)
+    for phase in ("pregrasp", "grasp", "squeeze"):
+        wrist = g.wrist_pose(phase)
+        root = rows[f"{phase}_qpos"][:7]
+        expected = Rotation.from_quat(wrist[3:], scalar_first=True) * Rotation.from_quat(
+            OFFSET[3:], scalar_first=True
+        )
+        assert (Rotation.from_quat(root[3:], scalar_first=True).inv() * expected).magnitude() < 1e-9
+    back = from_dexgraspbench(
+        rows["pregrasp_qpos"],
+        rows["grasp_qpos"],
+        rows["squeeze_qpos"],
+        root_offset=offset,
+        hand="toy",
+        joint_names=NAMES,
+        xml_joint_names=NAMES,
+    )
+    for phase in ("pregrasp", "grasp", "squeeze"):
+        np.testing.assert_allclose(back.joints(phase), g.joints(phase))
+        np.testing.assert_allclose(back.wrist_pose(phase), g.wrist_pose(phase), atol=1e-12)
 
 
 def test_dexgraspbench_layout_errors():
     with pytest.raises(GraspError, match="not in the XML's joints"):
-        to_dexgraspbench(make_grasp(), xml_joint_names=("a", "b", "c", "d"))
+        to_dexgraspbench(make_grasp(), root_offset=IDENTITY, xml_joint_names=("a", "b", "c", "d"))
     with pytest.raises(GraspError, match="expected 11 values"):
         from_dexgraspbench(
             np.zeros(10),
             np.zeros(11),
             np.zeros(11),
+            root_offset=IDENTITY,
             hand="toy",
             joint_names=NAMES,
             xml_joint_names=NAMES,
         )
+    with pytest.raises(GraspError, match="zero root quaternion"):
+        from_dexgraspbench(
+            np.zeros(11),
+            np.zeros(11),
+            np.zeros(11),
+            root_offset=IDENTITY,
+            hand="toy",
+            joint_names=NAMES,
+            xml_joint_names=NAMES,
+        )
+    skew = np.eye(4)
+    skew[0, 1] = 0.5
+    for bad, match in ((skew, "not a rigid transform"), (np.zeros(6), "4x4 transform or 7")):
+        with pytest.raises(GraspError, match=match):
+            to_dexgraspbench(make_grasp(), root_offset=bad, xml_joint_names=NAMES)

@@ -44,11 +44,17 @@ def row_case(
     objects_dir: str | Path,
     joint_map: Mapping[str, str] | None = None,
 ) -> tuple[Grasp, CollisionObject]:
-    """Row i as a Grasp for `hand` and its scaled object from `objects_dir`."""
+    """Row i as a Grasp for `hand` and its scaled object from `objects_dir`.
+
+    The rows' root pose is taken as the hand's wrist pose as it is (identity root offset): the
+    validator simulates `hand` itself, whose free root is the frame the rows place (an MJCF
+    file's root frame, as DexGraspBench does, or a project hand's root link).
+    """
     grasp = from_dexgraspbench(
         rows["pregrasp_qpos"][i],
         rows["grasp_qpos"][i],
         rows["squeeze_qpos"][i],
+        root_offset=np.eye(4),
         hand=hand.name,
         joint_names=hand.joint_names,
         xml_joint_names=xml_joint_names,
