@@ -11,7 +11,7 @@ from models.hands import available_hands, load_hand
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "hands",
-        help="list the built-in hands (DoF, joints, fingertips, anchor fingers)",
+        help="list the built-in hands (DoF, joints, actuators and couplings, fingertips, anchor fingers)",
         description="List the built-in robot hands, or describe one hand (a built-in name or a "
         "folder holding your own hand.urdf and hand.json).",
     )
@@ -39,6 +39,16 @@ def run(args: argparse.Namespace) -> int:
             + ("" if retry is None else f", retried at {retry:g} after a slip")
         )
         print(f"  proposals:   {h['pinch_proposals']} pinch proposals after the regular ones")
+        print(
+            f"  actuators:   {len(h['actuators'])} position actuators for {h['dof']} joints"
+            + ("" if h["couplings"] else " (one per joint)")
+        )
+        for c in h["couplings"]:
+            tendon = " + ".join(
+                f"{k:g} x {j}" for j, k in zip(c["joints"], c["tendon"], strict=True)
+            )
+            ratio = ":".join(f"{r:g}" for r in c["plan_ratio"])
+            print(f"    {c['name']:<10} drives the tendon {tendon}; planned in ratio {ratio}")
         print("  joints:      name [lower, upper] rad, closing direction")
         for j in h["joints"]:
             close = {1: "+ closes", -1: "- closes", 0: "spreads"}[j["closing"]]
