@@ -5,7 +5,12 @@ Developer tool, run once per hand where `../shared/reference/hands` exists:
     python tools/build_hand_urdf.py shadow
 
 Facts carried over from the vendor model: body names and frames, joint names, order, axes and
-limits, masses and inertias (static child bodies fused into their parent). Geometry is
+limits, masses and inertias. A joint-less child body (a fingertip body) is either fused into
+its parent (`fuse`) or kept as its own link attached by a fixed joint (`fixed`), with its own
+mass, inertia and geometry, as the vendor model has it: per hand in SOURCES, or `--static`.
+A separate light tip body makes MuJoCo's fingertip contacts softer than a tip fused into a
+heavier distal link (Allegro: inverse body weight 41.6 vs 21.3), so hands whose vendor model
+has one keep it. Geometry is
 project-authored: each vendor collision geom becomes a primitive (box, capsule, sphere); a
 mesh collision geom becomes the capsule fitted to its vertices (principal axis, radius at the
 90th percentile of the radial distance), so every link is simple enough for Drake's signed
@@ -25,11 +30,12 @@ from scipy.spatial.transform import Rotation
 REFERENCE = Path(__file__).resolve().parents[2] / "shared" / "reference" / "hands"
 OUT = Path(__file__).resolve().parents[1] / "models" / "hands"
 
-# hand name -> (Menagerie file, root body of the hand with the wrist removed)
+# hand name -> (Menagerie file, root body of the hand with the wrist removed, what becomes of
+# joint-less child bodies: "fuse" into the parent or keep as a "fixed" link)
 SOURCES = {
-    "shadow": ("shadow_hand/right_hand.xml", "rh_palm"),
-    "allegro": ("wonik_allegro/right_hand.xml", "palm"),
-    "leap": ("leap_hand/right_hand.xml", "palm"),
+    "shadow": ("shadow_hand/right_hand.xml", "rh_palm", "fuse"),
+    "allegro": ("wonik_allegro/right_hand.xml", "palm", "fixed"),
+    "leap": ("leap_hand/right_hand.xml", "palm", "fuse"),
 }
 
 
@@ -117,10 +123,14 @@ def inertial_xml(model: mujoco.MjModel, body: int) -> str:
     )
 
 
-def build(hand: str) -> str:
-    rel, root_name = SOURCES[hand]
+def build(hand: str, static: str | None = None) -> str:
+    rel, root_name, default_static = SOURCES[hand]
+    static = static or default_static
+    if static not in ("fuse", "fixed"):
+        raise ValueError(f"static must be 'fuse' or 'fixed', not {static!r}")
     spec = mujoco.MjSpec.from_file(str(REFERENCE / rel))
-    spec.compiler.fusestatic = True  # fold joint-less tip bodies into their parent
+    # fuse: fold joint-less tip bodies into their parent; fixed: keep them as bodies
+    spec.compiler.fusestatic = static == "fuse"
     model = spec.compile()
     root = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, root_name)
     links, joints = [], []
@@ -138,11 +148,19 @@ def build(hand: str) -> str:
         )
         if body == root:
             continue
+        parent = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, model.body_parentid[body])
+        if model.body_jntnum[body] == 0:  # a joint-less body kept (static="fixed")
+            joints.append(
+                f'  <joint name={quoteattr(name + "_fixed")} type="fixed">\n'
+                f"    <parent link={quoteattr(parent)}/><child link={quoteattr(name)}/>\n"
+                f'    <origin xyz="{fmt(model.body_pos[body])}" rpy="{fmt(rpy(model.body_quat[body]))}"/>\n'
+                f"  </joint>\n"
+            )
+            continue
         if model.body_jntnum[body] != 1:
             raise ValueError(f"body {name} has {model.body_jntnum[body]} joints; expected 1")
         j = model.body_jntadr[body]
         jname = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, j)
-        parent = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, model.body_parentid[body])
         lo, hi = model.jnt_range[j]
         joints.append(
             f'  <joint name={quoteattr(jname)} type="revolute">\n'
@@ -152,10 +170,12 @@ def build(hand: str) -> str:
             f'    <limit lower="{lo:.10g}" upper="{hi:.10g}" effort="10" velocity="5"/>\n'
             f"  </joint>\n"
         )
+    kept = "; tip bodies kept as fixed links" if static == "fixed" else ""
     header = (
         '<?xml version="1.0"?>\n'
         f"<!-- drograsp {hand} hand: kinematics mirror MuJoCo Menagerie ({rel}, root body"
-        f" {root_name}, wrist removed); primitive geometry authored by tools/build_hand_urdf.py -->\n"
+        f" {root_name}, wrist removed{kept}); primitive geometry authored by"
+        " tools/build_hand_urdf.py -->\n"
         f'<robot name="{hand}">\n'
     )
     return header + "".join(links) + "".join(joints) + "</robot>\n"
@@ -164,10 +184,18 @@ def build(hand: str) -> str:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("hands", nargs="*", default=list(SOURCES))
-    for hand in parser.parse_args().hands:
+    parser.add_argument(
+        "--static",
+        choices=("fuse", "fixed"),
+        default=None,
+        help="joint-less child bodies: fuse into the parent, or keep as links on fixed joints "
+        "(default: per hand, see SOURCES)",
+    )
+    args = parser.parse_args()
+    for hand in args.hands:
         path = OUT / hand / "hand.urdf"
         path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(build(hand))
+        path.write_text(build(hand, args.static))
         print(f"wrote {path}")
 
 

@@ -1,9 +1,12 @@
 """Put a hand into a Drake MultibodyPlant with a floating wrist.
 
-Drake filters only parent-child collision pairs. The hand.json ignore list (neighbours whose
-geometry overlaps by design) is always filtered; the other hand-hand pairs are filtered too
-unless `filter_self_collisions=False`. The grasp program keeps them: with every hand-hand pair
-filtered, solutions put fingers through each other and MuJoCo then pushes the object away.
+Drake filters only parent-child collision pairs (and links welded together). Links on fixed
+joints (a fingertip link) are filtered as MuJoCo filters them: against their own rigid body and
+its parent rigid body (`KinematicTree.rigid_neighbour_pairs`). The hand.json ignore list
+(neighbours whose geometry overlaps by design) is always filtered; the other hand-hand pairs are
+filtered too unless `filter_self_collisions=False`. The grasp program keeps them: with every
+hand-hand pair filtered, solutions put fingers through each other and MuJoCo then pushes the
+object away.
 
 With `merge_hull_links`, the boxes of each link named in hand.json `program_hull_links` become
 one convex hull (it contains them, so a hull without penetration means boxes without it too):
@@ -109,6 +112,13 @@ def add_hand_to_plant(
     geometry_ids = [g for b in bodies.values() for g in plant.GetCollisionGeometriesForBody(b)]
     if scene_graph is not None:
         manager = scene_graph.collision_filter_manager()
+        for a, b in hand.tree.rigid_neighbour_pairs():  # as MuJoCo's parent filter does
+            manager.Apply(
+                CollisionFilterDeclaration().ExcludeBetween(
+                    GeometrySet(plant.GetCollisionGeometriesForBody(bodies[a])),
+                    GeometrySet(plant.GetCollisionGeometriesForBody(bodies[b])),
+                )
+            )
         if filter_self_collisions:
             manager.Apply(CollisionFilterDeclaration().ExcludeWithin(GeometrySet(geometry_ids)))
         else:

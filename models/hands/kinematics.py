@@ -53,13 +53,16 @@ def _axis_angle(axis: torch.Tensor, angle: torch.Tensor) -> torch.Tensor:
 
 
 class Kinematics:
-    """FK for one kinematic tree; joint values are taken in `joint_order`."""
+    """FK for one kinematic tree; joint values are taken in `joint_order` (the revolute joints;
+    a fixed joint's child link rides on its parent at the joint's origin)."""
 
     def __init__(self, tree: KinematicTree, joint_order: list[str]):
         self.tree = tree
         self.links = list(tree.links)
         index = {name: i for i, name in enumerate(joint_order)}
-        self._steps = []  # (child link index, parent link index, origin, axis, q index)
+        # (child link index, parent link index, origin, axis, q index; axis and q index None
+        # for a fixed joint)
+        self._steps = []
         for link in self.links[1:]:
             j = tree.joints[link]
             self._steps.append(
@@ -67,8 +70,8 @@ class Kinematics:
                     self.links.index(link),
                     self.links.index(j.parent),
                     torch.as_tensor(j.origin, dtype=torch.float64),
-                    torch.as_tensor(j.axis, dtype=torch.float64),
-                    index[j.name],
+                    torch.as_tensor(j.axis, dtype=torch.float64) if j.moves else None,
+                    index[j.name] if j.moves else None,
                 )
             )
 
@@ -79,6 +82,9 @@ class Kinematics:
         poses[0] = base
         for child, parent, origin, axis, qi in self._steps:
             origin = origin.to(dtype=q.dtype, device=q.device)
+            if axis is None:
+                poses[child] = poses[parent] @ origin
+                continue
             axis = axis.to(dtype=q.dtype, device=q.device)
             poses[child] = poses[parent] @ origin @ _axis_angle(axis, q[:, qi])
         return torch.stack(poses, dim=1)

@@ -34,8 +34,14 @@ class HandModel:
     _kin: Kinematics = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
-        urdf_joints = {j.name for j in self.tree.joints.values()}
+        urdf_joints = {j.name for j in self.tree.moving_joints}
         order = set(self.meta.joint_order)
+        fixed = sorted(order & {j.name for j in self.tree.joints.values() if not j.moves})
+        if fixed:
+            raise HandError(
+                f"{self.folder}: hand.json joint_order names fixed joints {fixed}; list only "
+                "the revolute joints"
+            )
         if urdf_joints != order:
             raise HandError(
                 f"{self.folder}: hand.json joint_order does not match the URDF joints: "
@@ -50,8 +56,8 @@ class HandModel:
         for a, b in self.meta.ignore_collision_pairs:
             if a not in links or b not in links:
                 raise HandError(f"{self.folder}: ignore_collision_pairs names unknown link {a}/{b}")
+        by_name = {j.name: j for j in self.tree.moving_joints}
         for c in self.meta.couplings:
-            by_name = {j.name: j for j in self.tree.joints.values()}
             lows = np.array([by_name[n].lower for n in c.joints]) / c.plan_ratio
             highs = np.array([by_name[n].upper for n in c.joints]) / c.plan_ratio
             if np.ptp(np.minimum(lows, highs)) > 1e-9 or np.ptp(np.maximum(lows, highs)) > 1e-9:
@@ -95,12 +101,12 @@ class HandModel:
 
     @cached_property
     def lower(self) -> np.ndarray:
-        by_name = {j.name: j for j in self.tree.joints.values()}
+        by_name = {j.name: j for j in self.tree.moving_joints}
         return np.array([by_name[n].lower for n in self.joint_names])
 
     @cached_property
     def upper(self) -> np.ndarray:
-        by_name = {j.name: j for j in self.tree.joints.values()}
+        by_name = {j.name: j for j in self.tree.moving_joints}
         return np.array([by_name[n].upper for n in self.joint_names])
 
     @cached_property
@@ -197,7 +203,8 @@ class HandModel:
         q = torch.as_tensor(self.open_pose[None], dtype=torch.float64)
         poses = self._kin.link_poses(eye, q)[0].numpy()
         geoms = [self.tree.geoms[link] for link in self.tree.links]
-        return surface_points(geoms, poses, n=N_SURFACE_POINTS)
+        rigid = [self.link_index(self.tree.rigid_link(link)) for link in self.tree.links]
+        return surface_points(geoms, poses, n=N_SURFACE_POINTS, rigid_groups=rigid)
 
     def surface_points(self, wrist: torch.Tensor, q: torch.Tensor) -> torch.Tensor:
         """(B, 512, 3) world positions of the fixed surface points."""

@@ -33,23 +33,71 @@ class Joint:
     parent: str
     child: str
     origin: np.ndarray  # 4x4, child frame in parent frame at q = 0
-    axis: np.ndarray  # unit 3-vector in the child frame
+    axis: np.ndarray  # unit 3-vector in the child frame (zero for a fixed joint)
     lower: float
     upper: float
+    kind: str = "revolute"  # "revolute" (continuous included) | "fixed"
+
+    @property
+    def moves(self) -> bool:
+        return self.kind != "fixed"
 
 
 @dataclass
 class KinematicTree:
-    """Links in topological order (root first) and one revolute joint per non-root link."""
+    """Links in topological order (root first) and one joint per non-root link: revolute (the
+    hand's degrees of freedom) or fixed (a link rigidly attached to its parent, such as a
+    fingertip body: Drake welds it, MuJoCo keeps it as a body without a joint)."""
 
     name: str
     root: str
     links: list[str]
-    joints: dict[str, Joint]  # keyed by child link
+    joints: dict[str, Joint]  # keyed by child link; revolute and fixed
     geoms: dict[str, list[Geom]] = field(default_factory=dict)
 
     def parent_joint(self, link: str) -> Joint | None:
         return self.joints.get(link)
+
+    @property
+    def moving_joints(self) -> list[Joint]:
+        """The revolute joints (the hand's degrees of freedom), in link order."""
+        return [self.joints[link] for link in self.links[1:] if self.joints[link].moves]
+
+    def rigid_link(self, link: str) -> str:
+        """The link that `link` moves with: itself, unless a fixed joint attaches it to its
+        parent, then that parent's rigid link (the root for links fixed to the root). MuJoCo
+        calls it the weld body; links sharing one are a single rigid body."""
+        joint = self.joints.get(link)
+        while joint is not None and not joint.moves:
+            link = joint.parent
+            joint = self.joints.get(link)
+        return link
+
+    def rigid_neighbour_pairs(self) -> list[tuple[str, str]]:
+        """Link pairs that MuJoCo never collides and that no joint joins directly.
+
+        MuJoCo's parent filter works on rigid bodies (its weld bodies): links of one rigid body,
+        and a rigid body and its parent rigid body, never collide. Drake filters only links
+        joined by a joint and links welded together: a fingertip link on a fixed joint would
+        collide with its finger's middle link, and a link below a fixed spacer link with the
+        link above the spacer. Empty for a tree without fixed joints."""
+
+        def parent_rigid(rigid: str) -> str | None:
+            joint = self.joints.get(rigid)
+            return None if joint is None else self.rigid_link(joint.parent)
+
+        rigid = {link: self.rigid_link(link) for link in self.links}
+        pairs = []
+        for i, a in enumerate(self.links):
+            for b in self.links[i + 1 :]:
+                joined = any(
+                    (j := self.joints.get(x)) is not None and j.parent == y
+                    for x, y in ((a, b), (b, a))
+                )
+                ra, rb = rigid[a], rigid[b]
+                if not joined and (ra == rb or parent_rigid(ra) == rb or parent_rigid(rb) == ra):
+                    pairs.append((a, b))
+        return pairs
 
 
 def _origin(elem: ET.Element | None) -> np.ndarray:
@@ -83,7 +131,7 @@ def _geom(elem: ET.Element, path: Path) -> Geom:
 
 
 def read_urdf(path: Path) -> KinematicTree:
-    """Parse a hand URDF (revolute and fixed joints; fixed joints are not allowed below the root)."""
+    """Parse a hand URDF: revolute (or continuous) joints and fixed joints, anywhere in the tree."""
     try:
         root_elem = ET.parse(path).getroot()
     except (OSError, ET.ParseError) as err:
@@ -93,20 +141,40 @@ def read_urdf(path: Path) -> KinematicTree:
         geoms[link.get("name")] = [_geom(c, path) for c in link.findall("collision")]
     joints: dict[str, Joint] = {}
     for j in root_elem.findall("joint"):
-        jtype = j.get("type")
+        name, jtype = j.get("name"), j.get("type")
+        parent_elem, child_elem = j.find("parent"), j.find("child")
+        if parent_elem is None or child_elem is None:
+            raise HandError(f"{path}: joint {name} needs <parent link> and <child link>")
+        parent, child = parent_elem.get("link"), child_elem.get("link")
+        for link in (parent, child):
+            if link not in geoms:
+                raise HandError(f"{path}: joint {name} names link {link!r}, which has no <link>")
+        if child in joints:
+            raise HandError(
+                f"{path}: link {child} is the child of joints {joints[child].name} and {name}"
+            )
+        if jtype == "fixed":
+            joints[child] = Joint(
+                name, parent, child, _origin(j.find("origin")), np.zeros(3), 0.0, 0.0, "fixed"
+            )
+            continue
         if jtype not in ("revolute", "continuous"):
             raise HandError(
-                f"{path}: joint {j.get('name')} is {jtype}; hand URDFs use revolute joints only "
-                "(merge fixed links into their parent)"
+                f"{path}: joint {name} is {jtype}; hand URDFs use revolute (or continuous) "
+                "joints for the fingers and fixed joints for rigidly attached links"
             )
-        axis = np.array([float(v) for v in j.find("axis").get("xyz").split()])
+        axis_elem = j.find("axis")
+        axis = np.array(
+            [float(v) for v in (axis_elem.get("xyz") if axis_elem is not None else "1 0 0").split()]
+        )
+        if not np.linalg.norm(axis) > 0:
+            raise HandError(f"{path}: joint {name} has a zero axis")
         limit = j.find("limit")
         lower = float(limit.get("lower", -np.pi)) if limit is not None else -np.pi
         upper = float(limit.get("upper", np.pi)) if limit is not None else np.pi
-        child = j.find("child").get("link")
         joints[child] = Joint(
-            name=j.get("name"),
-            parent=j.find("parent").get("link"),
+            name=name,
+            parent=parent,
             child=child,
             origin=_origin(j.find("origin")),
             axis=axis / np.linalg.norm(axis),
@@ -124,4 +192,7 @@ def read_urdf(path: Path) -> KinematicTree:
         link = frontier.pop()
         order.append(link)
         frontier.extend(reversed(children.get(link, [])))
+    if len(order) != len(geoms):  # a cycle leaves links unreachable from the root
+        lost = sorted(set(geoms) - set(order))
+        raise HandError(f"{path}: links {lost} are not connected to the root link {roots[0]}")
     return KinematicTree(root_elem.get("name", path.stem), roots[0], order, joints, geoms)
