@@ -6,6 +6,7 @@ import json
 import shutil
 import subprocess
 import sys
+import xml.etree.ElementTree as ET
 
 import mujoco
 import numpy as np
@@ -13,6 +14,7 @@ import pytest
 import torch
 from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
 from pydrake.systems.framework import DiagramBuilder
+from scipy.spatial.transform import Rotation
 
 from models.errors import HandError
 from models.hands import load_hand
@@ -63,7 +65,11 @@ def set_mujoco(hand, model, data, qadr, wrist, q) -> None:
 
 
 def test_fk_agrees_in_torch_drake_mujoco(hand_name):
-    hand = load_hand(hand_name)
+    assert_fk_agrees(load_hand(hand_name))
+
+
+def assert_fk_agrees(hand) -> None:
+    """Every link's origin, PyTorch vs Drake vs MuJoCo, at 100 random configurations."""
     wrist, q = random_configs(hand, 100)
     torch_poses = hand.link_poses(torch.tensor(wrist), torch.tensor(q)).numpy()
     plant, handle, context = drake_hand(hand)
@@ -362,3 +368,277 @@ def test_user_hand_retry_squeeze_depth_must_be_deeper(tmp_path):
             load_hand(folder)
     (folder / "hand.json").write_text(json.dumps({**meta, "retry_squeeze_depth": 5}))
     assert load_hand(folder).meta.retry_squeeze_depth == 5.0
+
+
+# ---- fixed joints: links rigidly attached to their parent (fingertip bodies, mounting links)
+def _fixed_joint(name: str, parent: str, child: str, pose: np.ndarray) -> ET.Element:
+    joint = ET.Element("joint", name=name, type="fixed")
+    ET.SubElement(joint, "parent", link=parent)
+    ET.SubElement(joint, "child", link=child)
+    rpy = Rotation.from_matrix(pose[:3, :3]).as_euler("xyz")
+    ET.SubElement(
+        joint,
+        "origin",
+        xyz=" ".join(f"{v:.17g}" for v in pose[:3, 3]),
+        rpy=" ".join(f"{v:.17g}" for v in rpy),
+    )
+    return joint
+
+
+BASE_TO_PALM = np.eye(4)
+BASE_TO_PALM[:3, :3] = Rotation.from_euler("xyz", [0.3, -0.2, 0.5]).as_matrix()
+BASE_TO_PALM[:3, 3] = [0.01, -0.02, 0.05]
+SPACER = np.eye(4)
+SPACER[:3, :3] = Rotation.from_euler("xyz", [0.1, 0.2, -0.3]).as_matrix()
+SPACER[:3, 3] = [0.002, -0.001, 0.02]
+
+
+def user_hand_with_fixed_links(tmp_path) -> tuple:
+    """Allegro as a user's URDF might have it: a mounting root link `base` (no geometry, no
+    inertia) with the palm on a fixed joint, and a fixed `ff_spacer` link between the first
+    finger's proximal and medial links (ffj2 then starts from the spacer). Every other link
+    keeps Allegro's frames, so their poses relative to the palm are the built-in hand's."""
+    builtin = load_hand("allegro")
+    folder = tmp_path / "fixed"
+    shutil.copytree(builtin.folder, folder)
+    tree = ET.parse(folder / "hand.urdf")
+    robot = tree.getroot()
+    robot.insert(0, ET.Element("link", name="base"))
+    robot.insert(1, ET.Element("link", name="ff_spacer"))
+    ffj2 = next(j for j in robot.findall("joint") if j.get("name") == "ffj2")
+    origin = builtin.tree.joints["ff_medial"].origin
+    rest = np.linalg.inv(SPACER) @ origin
+    ffj2.find("parent").set("link", "ff_spacer")
+    ffj2.find("origin").set("xyz", " ".join(f"{v:.17g}" for v in rest[:3, 3]))
+    rpy = Rotation.from_matrix(rest[:3, :3]).as_euler("xyz")
+    ffj2.find("origin").set("rpy", " ".join(f"{v:.17g}" for v in rpy))
+    robot.append(_fixed_joint("base_to_palm", "base", "palm", BASE_TO_PALM))
+    robot.append(_fixed_joint("ff_spacer_fixed", "ff_proximal", "ff_spacer", SPACER))
+    tree.write(folder / "hand.urdf")
+    meta = json.loads((folder / "hand.json").read_text())
+    meta["name"] = "fixed"
+    (folder / "hand.json").write_text(json.dumps(meta))
+    return builtin, load_hand(folder)
+
+
+def test_fixed_links_anywhere_in_a_user_urdf(tmp_path):
+    """Fixed joints at the root, mid-finger and at the tips: the same 16 joints, the same
+    link poses as the built-in hand (relative to the palm), and PyTorch, Drake and MuJoCo agree
+    on every link, the joint-less ones included."""
+    builtin, hand = user_hand_with_fixed_links(tmp_path)
+    assert hand.root_link == "base" and hand.joint_names == builtin.joint_names
+    assert len(hand.link_names) == len(builtin.link_names) + 2
+    assert [j.name for j in hand.tree.moving_joints] == [j.name for j in builtin.tree.moving_joints]
+    assert hand.tree.rigid_link("ff_spacer") == "ff_proximal"
+    assert hand.tree.rigid_link("palm") == "base" and hand.tree.rigid_link("ff_tip") == "ff_distal"
+    _, q = random_configs(hand, 20, seed=3)
+    identity = torch.tensor([[0, 0, 0, 1.0, 0, 0, 0]], dtype=torch.float64).repeat(len(q), 1)
+    ours = hand.link_poses(identity, torch.tensor(q)).numpy()
+    theirs = builtin.link_poses(identity, torch.tensor(q)).numpy()
+    for i, link in enumerate(builtin.link_names):
+        expected = BASE_TO_PALM @ theirs[:, i]
+        np.testing.assert_allclose(ours[:, hand.link_index(link)], expected, atol=1e-12)
+    tips = builtin.fingertip_positions(identity, torch.tensor(q)).numpy()
+    np.testing.assert_allclose(
+        hand.fingertip_positions(identity, torch.tensor(q)).numpy(),
+        tips @ BASE_TO_PALM[:3, :3].T + BASE_TO_PALM[:3, 3],
+        atol=1e-12,
+    )
+    assert_fk_agrees(hand)
+    # MuJoCo keeps every link a body of its own, with its own mass (none for base, spacer)
+    ours_mj, theirs_mj = hand.mujoco_spec().compile(), builtin.mujoco_spec().compile()
+    for link in hand.link_names:
+        mass = ours_mj.body(link).mass[0]
+        assert mass == (theirs_mj.body(link).mass[0] if link in builtin.link_names else 0.0)
+    # the same surface points, on the same links
+    idx, local = hand.surface
+    ref_idx, ref_local = builtin.surface
+    assert [hand.link_names[i] for i in idx] == [builtin.link_names[i] for i in ref_idx]
+    np.testing.assert_allclose(local, ref_local, atol=1e-12)
+
+
+def mujoco_collision_pairs(model: mujoco.MjModel) -> set[tuple[str, str]]:
+    """Body pairs of the hand MuJoCo may collide: contype/conaffinity, then its body filter
+    (one weld body; a weld body and its parent weld body; <exclude> pairs)."""
+    excluded = set(model.exclude_signature.tolist())
+    hand_geoms = [g for g in range(model.ngeom) if model.geom_bodyid[g] > 0]
+    pairs = set()
+    for i, g1 in enumerate(hand_geoms):
+        for g2 in hand_geoms[i + 1 :]:
+            if not (
+                model.geom_contype[g1] & model.geom_conaffinity[g2]
+                or model.geom_contype[g2] & model.geom_conaffinity[g1]
+            ):
+                continue
+            b1, b2 = sorted((int(model.geom_bodyid[g1]), int(model.geom_bodyid[g2])))
+            w1, w2 = model.body_weldid[b1], model.body_weldid[b2]
+            p1 = model.body_weldid[model.body_parentid[w1]]
+            p2 = model.body_weldid[model.body_parentid[w2]]
+            if w1 == w2 or (w1 and w2 and (w1 == p2 or w2 == p1)):
+                continue
+            if (b1 << 16) + b2 in excluded:
+                continue
+            pairs.add((model.body(b1).name, model.body(b2).name))
+    return pairs
+
+
+def drake_collision_pairs(hand) -> set[tuple[str, str]]:
+    """Body pairs of the hand Drake may collide (hand-hand filtering off, as in the program)."""
+    builder = DiagramBuilder()
+    plant, scene_graph = AddMultibodyPlantSceneGraph(builder, 0.0)
+    handle = hand.add_to_plant(plant, scene_graph, filter_self_collisions=False)
+    plant.Finalize()
+    inspector = scene_graph.model_inspector()
+    order = {name: i for i, name in enumerate(hand.link_names)}
+    body = {
+        g: plant.GetBodyFromFrameId(inspector.GetFrameId(g)).name() for g in handle.geometry_ids
+    }
+    pairs = set()
+    for i, g1 in enumerate(handle.geometry_ids):
+        for g2 in handle.geometry_ids[i + 1 :]:
+            if body[g1] != body[g2] and not inspector.CollisionFiltered(g1, g2):
+                pairs.add(tuple(sorted((body[g1], body[g2]), key=order.get)))
+    return pairs
+
+
+def test_drake_and_mujoco_collide_the_same_link_pairs(hand_name, tmp_path):
+    """The grasp program's hand-hand constraint sees the pairs MuJoCo's validation collides:
+    a fixed link (Allegro's fingertips) is filtered against its own rigid body and the parent
+    rigid body, as MuJoCo's weld-body filter does, not only against its parent link."""
+    hands = [load_hand(hand_name)]
+    if hand_name == "allegro":
+        hands.append(user_hand_with_fixed_links(tmp_path)[1])
+    for hand in hands:
+        model = hand.mujoco_spec().compile()
+        order = {name: i for i, name in enumerate(hand.link_names)}
+        mujoco_pairs = {tuple(sorted(p, key=order.get)) for p in mujoco_collision_pairs(model)}
+        assert mujoco_pairs == drake_collision_pairs(hand)
+    if hand_name == "allegro":
+        assert ("ff_medial", "ff_tip") not in mujoco_pairs
+        assert ("ff_tip", "mf_tip") in mujoco_pairs
+
+
+def _collision_geoms(model: mujoco.MjModel, body: int) -> list[tuple]:
+    """(type, size, pos, quat) of a body's colliding geoms, rounded, sorted."""
+    out = []
+    for g in np.flatnonzero(model.geom_bodyid == body):
+        if model.geom_contype[g] or model.geom_conaffinity[g]:
+            out.append(
+                (
+                    int(model.geom_type[g]),
+                    *np.round(np.concatenate([model.geom_size[g], model.geom_pos[g]]), 7),
+                    *np.round(model.geom_quat[g], 6),
+                )
+            )
+    return sorted(out)
+
+
+def test_allegro_bodies_match_dexgraspbench():
+    """Allegro as DexGraspBench's hand file (Menagerie, kp 5) builds it: every body, the four
+    light tip bodies included, with the file's mass, inertia, centre of mass, inverse weight
+    (a tip's contacts are as soft: 41.6, not the 21.3 of a tip fused into its distal link),
+    collision geometry, and the same joints, actuators and exclusions."""
+    from planner.validation.hands import MJCF_PREFIX, mjcf_hand, project_hand
+
+    xml = reference_dir("dexgraspbench", "hand") / "allegro_right_hand.xml"
+    ours = project_hand("allegro").spec_factory().compile()
+    theirs = mjcf_hand(xml).spec_factory().compile()
+    hand = load_hand("allegro")
+    assert {"ff_tip", "mf_tip", "rf_tip", "th_tip"} <= set(hand.link_names)
+    for link in hand.link_names:
+        a, b = ours.body(link).id, theirs.body(MJCF_PREFIX + link).id
+        for field in ("body_mass", "body_inertia", "body_ipos", "body_invweight0"):
+            np.testing.assert_allclose(
+                getattr(ours, field)[a],
+                getattr(theirs, field)[b],
+                rtol=1e-5,
+                atol=1e-10,
+                err_msg=f"{link} {field}",
+            )
+        assert _collision_geoms(ours, a) == _collision_geoms(theirs, b), link
+    assert ours.body("ff_tip").invweight0[0] == pytest.approx(41.6, abs=0.1)
+    for joint in hand.joint_names:
+        a, b = ours.joint(joint), theirs.joint(MJCF_PREFIX + joint)
+        np.testing.assert_allclose(a.range, b.range)
+        for field in ("dof_damping", "dof_armature", "dof_frictionloss"):
+            assert getattr(ours, field)[a.dofadr[0]] == getattr(theirs, field)[b.dofadr[0]]
+    for u in range(theirs.nu):
+        joint = theirs.joint(theirs.actuator_trnid[u, 0]).name.removeprefix(MJCF_PREFIX)
+        mine = next(
+            v for v in range(ours.nu) if ours.joint(ours.actuator_trnid[v, 0]).name == joint
+        )
+        for field in ("actuator_gainprm", "actuator_biasprm", "actuator_ctrlrange"):
+            np.testing.assert_allclose(getattr(ours, field)[mine], getattr(theirs, field)[u])
+
+    def excluded(model):
+        names = {
+            (model.body(s >> 16).name, model.body(s & 0xFFFF).name) for s in model.exclude_signature
+        }
+        return {tuple(sorted(n.removeprefix(MJCF_PREFIX) for n in p)) for p in names}
+
+    assert excluded(ours) == excluded(theirs)
+
+
+def _build_tool():
+    import importlib.util
+
+    path = load_hand("allegro").folder.parents[2] / "tools" / "build_hand_urdf.py"
+    spec = importlib.util.spec_from_file_location("build_hand_urdf", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_allegro_urdf_is_the_build_tools_with_fixed_tips(tmp_path):
+    """tools/build_hand_urdf.py writes Allegro's URDF with its tip bodies as fixed links; fused
+    instead, the same hand has one body per distal link + tip (their mass and centre of mass
+    summed) and the same fingertips and surface points."""
+    reference_dir("hands", "wonik_allegro")
+    tool = _build_tool()
+    hand = load_hand("allegro")
+    assert tool.build("allegro") == hand.urdf_path.read_text()
+    folder = tmp_path / "fused"
+    shutil.copytree(hand.folder, folder)
+    (folder / "hand.urdf").write_text(tool.build("allegro", "fuse"))
+    meta = json.loads((folder / "hand.json").read_text())
+    for tip in meta["fingertips"]:
+        tip["link"] = tip["link"].replace("_tip", "_distal")
+    (folder / "hand.json").write_text(json.dumps({**meta, "name": "fused"}))
+    fused = load_hand(folder)
+    assert set(hand.link_names) - set(fused.link_names) == {"ff_tip", "mf_tip", "rf_tip", "th_tip"}
+    wrist, q = random_configs(hand, 10, seed=4)
+    np.testing.assert_allclose(
+        hand.fingertip_positions(torch.tensor(wrist), torch.tensor(q)),
+        fused.fingertip_positions(torch.tensor(wrist), torch.tensor(q)),
+        atol=1e-12,
+    )
+    np.testing.assert_array_equal(
+        hand.surface_points(torch.tensor(wrist), torch.tensor(q)),
+        fused.surface_points(torch.tensor(wrist), torch.tensor(q)),
+    )
+    split, whole = hand.mujoco_spec().compile(), fused.mujoco_spec().compile()
+    for finger in ("ff", "mf", "rf", "th"):
+        distal, tip = split.body(f"{finger}_distal"), split.body(f"{finger}_tip")
+        assert distal.subtreemass[0] == pytest.approx(whole.body(f"{finger}_distal").mass[0])
+        assert tip.mass[0] == pytest.approx(0.00684, abs=1e-5)
+        com = (distal.mass * distal.ipos + tip.mass * tip.ipos) / distal.subtreemass
+        np.testing.assert_allclose(com, whole.body(f"{finger}_distal").ipos, atol=1e-8)
+
+
+def test_user_urdf_joint_errors_are_named(tmp_path):
+    """Prismatic joints are refused by name; hand.json joint_order lists revolute joints only."""
+    folder = tmp_path / "joints"
+    shutil.copytree(load_hand("allegro").folder, folder)
+    urdf = (folder / "hand.urdf").read_text()
+    (folder / "hand.urdf").write_text(
+        urdf.replace('name="ffj1" type="revolute"', 'name="ffj1" type="prismatic"')
+    )
+    with pytest.raises(HandError, match="joint ffj1 is prismatic"):
+        load_hand(folder)
+    (folder / "hand.urdf").write_text(urdf)
+    meta = json.loads((folder / "hand.json").read_text())
+    meta["joint_order"].append("ff_tip_fixed")
+    meta["open_pose"]["ff_tip_fixed"] = meta["closing_direction"]["ff_tip_fixed"] = 0
+    (folder / "hand.json").write_text(json.dumps(meta))
+    with pytest.raises(HandError, match=r"names fixed joints \['ff_tip_fixed'\]"):
+        load_hand(folder)
