@@ -8,9 +8,12 @@ filtered too unless `filter_self_collisions=False`. The grasp program keeps them
 hand-hand pair filtered, solutions put fingers through each other and MuJoCo then pushes the
 object away.
 
-With `merge_hull_links`, the boxes of each link named in hand.json `program_hull_links` become
-one convex hull (it contains them, so a hull without penetration means boxes without it too):
-LEAP's 71 vendor boxes become 21 shapes and each signed-distance query has far fewer pairs.
+With `merge_hull_links` (the grasp program's simplified hand), the boxes of each link named in
+hand.json `program_hull_links` become one convex hull (it contains them, so a hull without
+penetration means boxes without it too): LEAP's 71 vendor boxes become 21 shapes and each
+signed-distance query has far fewer pairs. Collision meshes (ShadowHand's distal links: the
+vendor's hulls of 1067 and 1165 vertices) keep PROGRAM_MESH_VERTICES of their hull's vertices
+there; MuJoCo validates with the full hull.
 """
 
 from __future__ import annotations
@@ -26,7 +29,14 @@ from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import CoulombFriction
 
 from models.hands.primitives import primitive_mesh
+from models.hands.surface import farthest_point_sample
 from models.reproducible import rounded
+
+# Hull vertices a collision mesh keeps in the grasp program (farthest-point thinned, an inner
+# approximation). ShadowHand's full distal hulls made solves 1.5x slower than the capsules they
+# replaced; with 64 vertices solves take 1.1x as long and the full hull's vertices stay within
+# 0.9 (finger) and 1.0 mm (thumb) of the thinned one (docs/hands_log.md).
+PROGRAM_MESH_VERTICES = 64
 
 
 class DrakeHand:
@@ -76,15 +86,23 @@ def _box_corners(hand, link: str) -> np.ndarray:
     return rounded(np.concatenate([primitive_mesh(g).vertices for g in boxes]))
 
 
-def _urdf_without_boxes(hand, links: tuple[str, ...]) -> str:
-    """The hand's URDF text with the collision boxes of `links` removed."""
+def thinned_hull(geom) -> np.ndarray:
+    """(N, 3) link-frame vertices of a mesh geom's hull, thinned to PROGRAM_MESH_VERTICES."""
+    verts = geom.vertices
+    if len(verts) > PROGRAM_MESH_VERTICES:
+        verts = verts[farthest_point_sample(verts, PROGRAM_MESH_VERTICES)]
+    return rounded(verts @ geom.pose[:3, :3].T + geom.pose[:3, 3])
+
+
+def _program_urdf(hand, links: tuple[str, ...]) -> str:
+    """The hand's URDF text without the collision boxes of `links` and without meshes (the
+    collision ones are added back simplified; the program draws nothing)."""
     root = ET.parse(hand.urdf_path).getroot()
     for elem in root.findall("link"):
-        if elem.get("name") not in links:
-            continue
-        for col in elem.findall("collision"):
-            if col.find("geometry/box") is not None:
-                elem.remove(col)
+        for shape in elem.findall("collision") + elem.findall("visual"):
+            boxed = elem.get("name") in links and shape.find("geometry/box") is not None
+            if (boxed and shape.tag == "collision") or shape.find("geometry/mesh") is not None:
+                elem.remove(shape)
     return ET.tostring(root, encoding="unicode")
 
 
@@ -96,11 +114,25 @@ def add_hand_to_plant(
     parser = Parser(plant)
     parser.SetAutoRenaming(True)
     hulls = hand.meta.program_hull_links if merge_hull_links else ()
-    if hulls:
-        (instance,) = parser.AddModelsFromString(_urdf_without_boxes(hand, hulls), "urdf")
+    meshes = [
+        (link, i, g)
+        for link, geoms in hand.tree.geoms.items()
+        for i, g in enumerate(geoms)
+        if g.kind == "mesh"
+    ]
+    if merge_hull_links and (hulls or meshes):
+        (instance,) = parser.AddModelsFromString(_program_urdf(hand, hulls), "urdf")
     else:
         (instance,) = parser.AddModels(str(hand.urdf_path))
     bodies = {name: plant.GetBodyByName(name, instance) for name in hand.link_names}
+    for link, i, geom in meshes if merge_hull_links else ():
+        plant.RegisterCollisionGeometry(
+            bodies[link],
+            RigidTransform(),
+            Convex(thinned_hull(geom).T, f"{hand.name}_{link}_mesh{i}"),
+            f"{link}_mesh{i}",
+            CoulombFriction(1.0, 1.0),
+        )
     for link in hulls:
         plant.RegisterCollisionGeometry(
             bodies[link],

@@ -4,6 +4,8 @@ is no second model file to keep in sync."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import mujoco
 import numpy as np
 
@@ -23,6 +25,11 @@ def hand_spec(hand) -> mujoco.MjSpec:
     hand.json contact exclusions."""
     spec = mujoco.MjSpec.from_file(str(hand.urdf_path))
     spec.compiler.fusestatic = False
+    for (
+        mesh
+    ) in spec.meshes:  # collision meshes: absolute, so a scene that attaches the hand finds them
+        if mesh.file and not Path(mesh.file).is_absolute():
+            mesh.file = str((hand.urdf_path.parent / mesh.file).resolve())
     root = spec.body(hand.root_link)
     root.add_freejoint(name=WRIST_JOINT)
     spec.worldbody.add_body(name=WRIST_MOCAP, mocap=True)

@@ -1,4 +1,4 @@
-"""Box, sphere and capsule: closed meshes and exact signed distances in the link frame."""
+"""Box, sphere, capsule and convex mesh: closed meshes and signed distances in the link frame."""
 
 from __future__ import annotations
 
@@ -14,6 +14,8 @@ def primitive_mesh(geom: Geom) -> trimesh.Trimesh:
         mesh = trimesh.creation.box(extents=2 * np.asarray(geom.size))
     elif geom.kind == "sphere":
         mesh = trimesh.creation.icosphere(subdivisions=3, radius=geom.size[0])
+    elif geom.kind == "mesh":
+        mesh = trimesh.convex.convex_hull(geom.vertices)
     else:
         mesh = trimesh.creation.capsule(
             height=2 * geom.size[1], radius=geom.size[0], count=[32, 32]
@@ -23,8 +25,14 @@ def primitive_mesh(geom: Geom) -> trimesh.Trimesh:
 
 
 def signed_distance(geom: Geom, points: np.ndarray) -> np.ndarray:
-    """Signed distance (negative inside) from link-frame points (N, 3) to the primitive."""
+    """Signed distance (negative inside) from link-frame points (N, 3) to the primitive; for a
+    convex mesh, the largest distance beyond its face planes (exact inside and on the surface,
+    a lower bound outside: the sign is always right)."""
     local = (points - geom.pose[:3, 3]) @ geom.pose[:3, :3]
+    if geom.kind == "mesh":
+        hull = trimesh.convex.convex_hull(geom.vertices)
+        offsets = np.einsum("fj,fj->f", hull.face_normals, hull.triangles[:, 0])
+        return (local @ hull.face_normals.T - offsets).max(axis=1)
     if geom.kind == "sphere":
         return np.linalg.norm(local, axis=1) - geom.size[0]
     if geom.kind == "capsule":

@@ -19,12 +19,15 @@ from models.errors import HandError
 
 @dataclass(frozen=True)
 class Geom:
-    """A collision primitive in its link's frame. size: box half-extents, (r,), or (r, half-length)."""
+    """A collision shape in its link's frame. size: box half-extents, (r,), (r, half-length),
+    or () for a convex mesh, whose hull vertices (in the geom frame) are `vertices`."""
 
-    kind: str  # "box" | "sphere" | "capsule"
+    kind: str  # "box" | "sphere" | "capsule" | "mesh" (collided as its convex hull)
     pose: np.ndarray  # 4x4 in the link frame
     size: tuple[float, ...]
     name: str = ""
+    vertices: np.ndarray | None = field(default=None, repr=False)
+    file: Path | None = None  # a mesh's file (absolute), for Drake and MuJoCo
 
 
 @dataclass(frozen=True)
@@ -125,9 +128,38 @@ def _geom(elem: ET.Element, path: Path) -> Geom:
     if child.tag in ("capsule", "cylinder"):
         r, length = float(child.get("radius")), float(child.get("length"))
         return Geom("capsule", pose, (r, length / 2), elem.get("name", ""))
+    if child.tag == "mesh":
+        return _mesh_geom(child, pose, elem.get("name", ""), path)
     raise HandError(
-        f"{path}: collision geometry <{child.tag}> is not supported; use box, sphere or capsule"
+        f"{path}: collision geometry <{child.tag}> is not supported; use box, sphere, capsule "
+        "or mesh (collided as its convex hull)"
     )
+
+
+def _mesh_geom(elem: ET.Element, pose: np.ndarray, name: str, path: Path) -> Geom:
+    """A <mesh filename="..."/> collision: the file relative to the URDF's folder, collided as
+    its convex hull (what MuJoCo and Drake's signed distance use for a mesh anyway)."""
+    import trimesh
+
+    filename = elem.get("filename", "")
+    if not filename or "://" in filename:
+        raise HandError(
+            f"{path}: mesh filename {filename!r}: give a path relative to the URDF's folder "
+            "(package:// and URLs are not resolved)"
+        )
+    file = (path.parent / filename).resolve()
+    if elem.get("scale") is not None:
+        raise HandError(
+            f"{path}: mesh {filename}: scale the file itself instead of a URDF scale attribute"
+        )
+    try:
+        mesh = trimesh.load(file, force="mesh", process=False)
+        hull = trimesh.convex.convex_hull(np.asarray(mesh.vertices, dtype=float))
+    except Exception as err:  # noqa: BLE001 - any reader failure is the same bad input
+        raise HandError(f"{path}: cannot read collision mesh {file}: {err}") from None
+    if len(hull.vertices) < 4 or not hull.volume > 0:
+        raise HandError(f"{path}: collision mesh {file} has no volume")
+    return Geom("mesh", pose, (), name, np.asarray(hull.vertices, dtype=float), file)
 
 
 def read_urdf(path: Path) -> KinematicTree:
