@@ -2,8 +2,9 @@
 
 Three sources, one output type (a list of convex `trimesh.Trimesh` hulls, in the object's frame):
 - generated objects: the pieces their construction already knows (instant, exact);
-- meshes: CoACD, cached on disk by a hash of the mesh and the parameters (13-18 s per real mesh,
-  so it must never run twice);
+- watertight meshes: CoACD, cached on disk by a hash of the mesh and the parameters (13-18 s,
+  up to minutes, per real mesh, so it must never run twice), in a subprocess with a time limit;
+- open meshes: cloud pieces from their surface samples (CoACD may never finish on them);
 - bare clouds: clusters of surface points, each hull thickened inward along the normals and split
   until it covers no empty space, so cavities (a mug's inside, its handle's hole) stay open.
 """
@@ -13,6 +14,11 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import subprocess
+import sys
+import tempfile
+import time
+import zipfile
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -21,6 +27,7 @@ import trimesh
 from scipy.cluster.vq import kmeans2
 from scipy.spatial import ConvexHull, QhullError, cKDTree
 
+from ..errors import ObjectError
 from ..reproducible import rounded
 from .cache import cache_dir
 
@@ -79,12 +86,22 @@ def hull_mesh(
 
 
 def coacd_pieces(
-    mesh: trimesh.Trimesh, use_cache: bool = True, **params: object
+    mesh: trimesh.Trimesh,
+    use_cache: bool = True,
+    *,
+    name: str = "the mesh",
+    timeout: float | None = None,
+    **params: object,
 ) -> list[trimesh.Trimesh]:
     """CoACD approximate convex decomposition of a mesh, cached by content hash.
 
     The key covers the vertex and face bytes, the parameters and the CoACD version, so a changed
     mesh or setting never reads a stale entry. Set DROGRASP_CACHE to move the cache.
+
+    CoACD runs in a subprocess (`models.objects.coacd_worker`): where it aborts (it does on
+    some geometry) or runs past `timeout` seconds (default $DROGRASP_COACD_TIMEOUT or 900; it
+    never finishes on some open meshes) an ObjectError says so, and this process lives on.
+    Progress goes to stderr while it runs (a first decomposition takes minutes on a scan).
     """
     import coacd
 
@@ -100,14 +117,105 @@ def coacd_pieces(
     if use_cache and path.exists():
         try:
             return _read_pieces(path)
-        except (OSError, ValueError, KeyError):
+        except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
             pass  # a damaged entry is recomputed below
-    coacd.set_log_level("error")
-    parts = coacd.run_coacd(coacd.Mesh(verts, faces), **opts)
-    pieces = hulls([np.asarray(v) for v, _ in parts])
+    parts = _run_coacd(verts, faces, opts, name, coacd_timeout(timeout))
+    pieces = hulls(parts)
     if use_cache:
         _write_pieces(path, pieces)
     return pieces
+
+
+def coacd_timeout(timeout: float | None = None) -> float:
+    """Seconds CoACD may run: `timeout`, else $DROGRASP_COACD_TIMEOUT, else 900."""
+    if timeout is None:
+        text = os.environ.get("DROGRASP_COACD_TIMEOUT", "900")
+        try:
+            timeout = float(text)
+        except ValueError:
+            raise ObjectError(
+                f"DROGRASP_COACD_TIMEOUT={text!r} is not a number of seconds"
+            ) from None
+    if not timeout > 0:
+        raise ObjectError(f"the CoACD time limit must be positive seconds, got {timeout}")
+    return float(timeout)
+
+
+def _run_coacd(
+    verts: np.ndarray, faces: np.ndarray, opts: dict, name: str, timeout: float
+) -> list[np.ndarray]:
+    with tempfile.TemporaryDirectory(prefix="drograsp_coacd_") as tmp:
+        src, dst = Path(tmp) / "mesh.npz", Path(tmp) / "pieces.npz"
+        np.savez(src, vertices=verts, faces=faces)
+        cmd = [sys.executable, "-m", "models.objects.coacd_worker", str(src), str(dst)]
+        cmd.append(json.dumps(opts))
+        root = str(Path(__file__).resolve().parents[2])
+        path = os.pathsep.join(p for p in (root, os.environ.get("PYTHONPATH")) if p)
+        env = os.environ | {"PYTHONPATH": path}
+        start = time.monotonic()
+        say = _progress(name, len(faces))
+        with open(Path(tmp) / "log.txt", "w+") as log:
+            proc = subprocess.Popen(cmd, stdout=log, stderr=log, env=env, cwd=tmp)
+            try:
+                while True:
+                    try:
+                        code = proc.wait(timeout=min(5.0, timeout))
+                        break
+                    except subprocess.TimeoutExpired:
+                        elapsed = time.monotonic() - start
+                        if elapsed >= timeout:
+                            raise ObjectError(
+                                f"CoACD did not finish the convex decomposition of {name} in "
+                                f"{timeout:.0f} s (it may never finish on an open or damaged "
+                                "mesh); close the mesh's holes, allow more time with "
+                                "DROGRASP_COACD_TIMEOUT=SECONDS, or use surface pieces "
+                                "(collision_pieces('surface'), drograsp plan --pieces surface)"
+                            ) from None
+                        say(elapsed)
+            finally:
+                if proc.poll() is None:
+                    proc.kill()
+                    proc.wait()
+            say(time.monotonic() - start, done=True)
+            if code != 0 or not dst.exists():
+                log.seek(0)
+                tail = " ".join(log.read().split())[-300:]
+                how = f"was killed by signal {-code}" if code < 0 else f"exited with status {code}"
+                raise ObjectError(
+                    f"CoACD failed on {name}: it {how} ({tail or 'no message'}); the mesh is "
+                    "probably degenerate (flat, or damaged faces): repair it, or use surface "
+                    "pieces (collision_pieces('surface'), drograsp plan --pieces surface)"
+                )
+        with np.load(dst) as data:
+            return [np.asarray(data[f"v{i}"]) for i in range(int(data["count"]))]
+
+
+def _progress(name: str, faces: int):
+    """A progress line on stderr every 10 s (a first decomposition takes minutes)."""
+    state = {"last": 0.0}
+    interactive = sys.stderr.isatty()
+    print(
+        f"convex decomposition of {name} ({faces} faces) with CoACD: first time for this mesh, "
+        "cached afterwards; it can take several minutes",
+        file=sys.stderr,
+        flush=True,
+    )
+
+    def say(elapsed: float, done: bool = False) -> None:
+        if done:
+            end = "\n" if interactive else ""
+            print(
+                f"{end}convex decomposition of {name}: {elapsed:.0f} s", file=sys.stderr, flush=True
+            )
+            return
+        if elapsed - state["last"] >= 10.0:
+            state["last"] = elapsed
+            if interactive:
+                print(f"\r  CoACD running: {elapsed:.0f} s", end="", file=sys.stderr, flush=True)
+            else:
+                print(f"  CoACD running: {elapsed:.0f} s", file=sys.stderr, flush=True)
+
+    return say
 
 
 def _write_pieces(path: Path, pieces: list[trimesh.Trimesh]) -> None:

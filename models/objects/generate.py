@@ -7,7 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .library import category, make_assembly
+from ..errors import ObjectError
+from .library import category, check_seed, make_assembly
 from .model import ObjectModel
 
 
@@ -17,6 +18,7 @@ def make_object(category_name: str, seed: int = 0) -> ObjectModel:
     Upright (+z up; long tools lie along x), axis-aligned bounding box centred at the origin.
     """
     cat = category(category_name)
+    seed = check_seed(seed)
     asm = make_assembly(cat.name, seed)
     return ObjectModel(
         name=f"{cat.name}_{seed:05d}",
@@ -40,7 +42,7 @@ def obj_text(vertices: np.ndarray, faces: np.ndarray, header: str = "") -> str:
 def export_object(obj: ObjectModel, out: str | Path) -> tuple[Path, Path | None]:
     """Write the mesh as OBJ and, if labelled, `<stem>.parts.json` (per-face labels, part names)."""
     if obj.mesh is None:
-        raise ValueError("only a mesh can be exported as OBJ")
+        raise ObjectError("only a mesh can be exported as OBJ")
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     header = f"drograsp object {obj.name}" + (

@@ -14,6 +14,7 @@ from ..errors import InstructionError
 from .library import CATEGORIES, category
 
 INTENTS: tuple[str, ...] = ("Use", "Hold", "Handover", "Liftup")
+MAX_INSTRUCTION = 300  # characters: an instruction is a short sentence (and parsing stays fast)
 
 TABLE: dict[str, tuple[tuple[str, str], ...]] = {
     "mug": (
@@ -138,6 +139,11 @@ def parse_instruction(text: str, strict: bool = False) -> Instruction:
         raise InstructionError(
             'the instruction is empty; write "[Intent] a [Object] by [Part]", e.g. "Use a mug by'
             ' handle" (intents: Use, Hold, Handover, Liftup)'
+        )
+    if len(text) > MAX_INSTRUCTION:
+        raise InstructionError(
+            f"the instruction is {len(text)} characters long; write one short sentence of at "
+            f'most {MAX_INSTRUCTION}, "[Intent] a [Object] by [Part]"'
         )
     m = _PATTERN.match(text)
     if not m:

@@ -6,11 +6,13 @@ first use and kept, so loading is cheap and a planner asks only for what it need
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
 import trimesh
 
+from ..errors import ObjectError
 from . import collision, surface
 
 DENSE_POINTS = 16384
@@ -49,7 +51,20 @@ class ObjectModel:
     source: str | None = None  # file path, or None for arrays and generated objects
     viewpoint: np.ndarray | None = None  # camera position of a single-view cloud
     construction_pieces: list[np.ndarray] | None = None  # convex point sets known by construction
+    # a loaded mesh's faces in its file: mesh face i is the file's face source_faces[i] (the
+    # loader drops degenerate faces), of source_face_count in all
+    source_faces: np.ndarray | None = field(default=None, repr=False)
+    source_face_count: int | None = None
+    labels_source: str | None = None  # the labels file the part labels came from, if any
+    source_scale: float = 1.0  # the scale `source` was loaded with
+    # what collision_pieces("auto") uses: "auto" (see there), "coacd" or "surface"
+    pieces: str = "auto"
     _derived: dict = field(default_factory=dict, repr=False)
+
+    def __setattr__(self, name: str, value: object) -> None:
+        if name == "pieces" and value not in PIECE_METHODS:
+            raise ObjectError(f"pieces must be one of {', '.join(PIECE_METHODS)}, not {value!r}")
+        super().__setattr__(name, value)
 
     # ---- surface -------------------------------------------------------------------------
     @property
@@ -132,29 +147,65 @@ class ObjectModel:
     def collision_pieces(self, method: str = "auto") -> list[trimesh.Trimesh]:
         """Convex hulls covering the object, for Drake `Convex` and MuJoCo mesh geoms.
 
-        method: "auto" (construction pieces for generated objects, CoACD for meshes, cloud pieces
-        for clouds), "construction", "coacd" (cached on disk) or "cloud" (from surface points).
+        method: "auto" (construction pieces for generated objects; CoACD for watertight meshes,
+        surface pieces for open ones, on which CoACD may never finish; cloud pieces for clouds;
+        or what `self.pieces` names), "construction", "coacd" (in a subprocess with a time
+        limit, cached on disk), "surface" (cloud pieces from the mesh's surface samples, in
+        about a second) or "cloud" (from surface points).
         """
+        if method == "auto" and self.pieces != "auto":
+            method = self.pieces
         if method == "auto":
             if self.construction_pieces is not None:
                 method = "construction"
+            elif self.mesh is None:
+                method = "cloud"
+            elif self.mesh.is_watertight:
+                method = "coacd"
             else:
-                method = "coacd" if self.mesh is not None else "cloud"
+                warnings.warn(
+                    f"{self.name}: the mesh is open (not watertight), and CoACD may never finish "
+                    "on an open mesh; using pieces from its surface samples instead (close the "
+                    "mesh's holes for CoACD's pieces)",
+                    OpenMeshWarning,
+                    stacklevel=2,
+                )
+                method = "surface"
+        if method not in PIECE_METHODS:
+            raise ObjectError(f"unknown method {method!r}: one of {', '.join(PIECE_METHODS)}")
         key = f"pieces-{method}"
         if key not in self._derived:
             if method == "construction":
                 if self.construction_pieces is None:
-                    raise ValueError(
+                    raise ObjectError(
                         "this object has no construction pieces; use 'coacd' or 'cloud'"
                     )
                 pieces = collision.hulls(self.construction_pieces)
-            elif method == "coacd":
+            elif method in ("coacd", "surface"):
                 if self.mesh is None:
-                    raise ValueError("CoACD needs a mesh; a bare cloud uses method='cloud'")
-                pieces = collision.coacd_pieces(self.mesh)
-            elif method == "cloud":
-                pieces = collision.cloud_pieces(self.points, self.normals)
+                    raise ObjectError(
+                        f"{method!r} pieces need a mesh; a bare cloud uses method='cloud'"
+                    )
+                if method == "coacd":
+                    pieces = collision.coacd_pieces(self.mesh, name=self.name)
+                else:
+                    normals = self.normals
+                    if not self.mesh.is_winding_consistent:  # face normals point either way
+                        normals = surface.estimate_normals(self.points)
+                    pieces = collision.cloud_pieces(self.points, normals)
             else:
-                raise ValueError(f"unknown method {method!r}: auto, construction, coacd or cloud")
+                pieces = collision.cloud_pieces(self.points, self.normals)
+            if not pieces:
+                raise ObjectError(
+                    f"{self.name}: the {method} decomposition gave no piece with volume; is "
+                    "the object a thin sheet?"
+                )
             self._derived[key] = pieces
         return self._derived[key]
+
+
+PIECE_METHODS = ("auto", "construction", "coacd", "surface", "cloud")
+
+
+class OpenMeshWarning(UserWarning):
+    """An open mesh got surface pieces instead of CoACD's."""

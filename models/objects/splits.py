@@ -11,10 +11,10 @@ import zlib
 
 import numpy as np
 
-from .library import category
+from ..errors import ObjectError
+from .library import category, check_seed
+from .names import HELDOUT, SPLITS
 
-HELDOUT: tuple[str, ...] = ("teapot", "screwdriver")
-SPLITS: tuple[str, ...] = ("train", "val", "test", "heldout")
 _BLOCK = ("train",) * 8 + ("val", "test")
 
 
@@ -23,7 +23,7 @@ def split_of(category_name: str, seed: int) -> str:
     name = category(category_name).name
     if name in HELDOUT:
         return "heldout"
-    block, pos = divmod(int(seed), len(_BLOCK))
+    block, pos = divmod(check_seed(seed), len(_BLOCK))
     rng = np.random.default_rng([zlib.crc32(f"split:{name}".encode()), block])
     return _BLOCK[int(rng.permutation(len(_BLOCK))[pos])]
 
@@ -31,7 +31,8 @@ def split_of(category_name: str, seed: int) -> str:
 def seeds(category_name: str, split: str, count: int, start: int = 0) -> list[int]:
     """The first `count` seeds from `start` on that fall in `split` (empty if it never can)."""
     if split not in SPLITS:
-        raise ValueError(f"unknown split {split!r}; choose one of {SPLITS}")
+        raise ObjectError(f"unknown split {split!r}; choose one of {SPLITS}")
+    start = check_seed(start)
     name = category(category_name).name
     if (split == "heldout") != (name in HELDOUT):
         return []

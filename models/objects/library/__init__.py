@@ -65,6 +65,11 @@ def categories() -> tuple[str, ...]:
 
 def category(name: str) -> Category:
     """The category called `name` (also accepts its noun, e.g. 'spray bottle')."""
+    if not isinstance(name, str):
+        raise ObjectError(
+            f"the object category must be a name such as 'mug', got {name!r}; choose one of: "
+            f"{', '.join(CATEGORIES)}"
+        )
     key = name.strip().lower().replace(" ", "_")
     if key not in CATEGORIES:
         raise ObjectError(
@@ -75,9 +80,18 @@ def category(name: str) -> Category:
 
 def rng_for(name: str, seed: int) -> np.random.Generator:
     """The generator for (category, seed): stable across runs, machines and Python versions."""
+    return np.random.default_rng([zlib.crc32(name.encode("utf-8")), check_seed(seed)])
+
+
+def check_seed(seed: object) -> int:
+    """A library seed: a non-negative integer (Python or numpy), else an ObjectError."""
+    if isinstance(seed, bool) or not isinstance(seed, int | np.integer):
+        raise ObjectError(
+            f"seed must be a non-negative integer (the instance number), got {seed!r}"
+        )
     if int(seed) < 0:
         raise ObjectError(f"seed must be a non-negative integer, got {seed}")
-    return np.random.default_rng([zlib.crc32(name.encode("utf-8")), int(seed)])
+    return int(seed)
 
 
 def make_assembly(name: str, seed: int) -> Assembly:
