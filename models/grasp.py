@@ -10,7 +10,10 @@ Records save and load as JSON or NPZ without pickle, so files are safe to share.
 
 from __future__ import annotations
 
+import io
 import json
+import os
+import zipfile
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -24,12 +27,23 @@ PHASES: tuple[str, ...] = ("pregrasp", "grasp", "squeeze")
 ROOT_SIZE = 7  # xyz + quaternion wxyz, DexGraspBench's root layout
 
 
+def _numbers(value: Any, name: str) -> np.ndarray:
+    """`value` as a float array; GraspError for text, booleans, complex or ragged input."""
+    try:
+        raw = np.asarray(value)
+    except (TypeError, ValueError) as err:
+        raise GraspError(f"{name}: not a rectangular array of numbers ({err})") from None
+    if raw.dtype.kind not in "iuf":
+        kinds = {"b": "booleans", "c": "complex numbers", "U": "text", "S": "bytes"}
+        raise GraspError(
+            f"{name}: expected numbers, got {kinds.get(raw.dtype.kind, f'dtype {raw.dtype}')}"
+        )
+    return raw.astype(np.float64)
+
+
 def _vector(value: Any, name: str, size: int | None = None) -> np.ndarray:
     """A finite float vector of the given size, or a GraspError that names the field."""
-    try:
-        arr = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError) as err:
-        raise GraspError(f"{name}: not a numeric vector ({err})") from None
+    arr = _numbers(value, name)
     if arr.ndim != 1:
         raise GraspError(f"{name}: expected a 1-D vector, got shape {arr.shape}")
     if size is not None and arr.shape[0] != size:
@@ -94,13 +108,21 @@ class Grasp:
             if quat is not None:
                 setattr(self, quat_name, _quaternion(quat, quat_name))
         if self.joint_names is not None:
+            if isinstance(self.joint_names, str) or not isinstance(
+                self.joint_names, Sequence | np.ndarray
+            ):
+                raise GraspError(
+                    f"joint_names: expected a list of joint names, got {self.joint_names!r}"
+                )
+            if not all(isinstance(n, str | np.str_) for n in self.joint_names):
+                raise GraspError("joint_names: every joint name must be a string")
             self.joint_names = tuple(str(n) for n in self.joint_names)
             if len(self.joint_names) != dof:
                 raise GraspError(
                     f"joint_names: {len(self.joint_names)} names for {dof} joint values"
                 )
         if self.anchors is not None:
-            anchors = np.asarray(self.anchors, dtype=np.float64)
+            anchors = _numbers(self.anchors, "anchors")
             if anchors.ndim != 2 or anchors.shape[1] != 3:
                 raise GraspError(f"anchors: expected shape (K, 3), got {anchors.shape}")
             if not np.all(np.isfinite(anchors)):
@@ -197,6 +219,8 @@ class Grasp:
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> Grasp:
+        if not isinstance(data, Mapping):
+            raise GraspError(f"a grasp record must be a dict, got {type(data).__name__}")
         known = set(cls.__dataclass_fields__)
         unknown = set(data) - known
         if unknown:
@@ -207,10 +231,12 @@ class Grasp:
         return cls(**dict(data))
 
     def to_json(self) -> str:
-        return json.dumps(self.to_dict(), indent=1)
+        return json.dumps(_jsonable(self.to_dict(), "metrics"), indent=1)
 
     @classmethod
     def from_json(cls, text: str) -> Grasp:
+        if not isinstance(text, str):
+            raise GraspError(f"a JSON grasp record is text, got {type(text).__name__}")
         try:
             data = json.loads(text)
         except json.JSONDecodeError as err:
@@ -228,7 +254,7 @@ class Grasp:
             if key in ("hand", "instruction"):
                 out[key] = np.array(value)
             elif key == "metrics":
-                out[key] = np.array(json.dumps(value))
+                out[key] = np.array(json.dumps(_jsonable(value, "metrics")))
             elif key == "joint_names":
                 out[key] = np.array(value, dtype=str)
             else:
@@ -240,41 +266,101 @@ class Grasp:
         data: dict[str, Any] = {}
         for key in arrays:
             value = np.asarray(arrays[key])
-            if key in ("hand", "instruction"):
-                data[key] = str(value)
-            elif key == "metrics":
-                data[key] = json.loads(str(value))
+            if key in ("hand", "instruction", "metrics"):
+                if value.ndim != 0 or value.dtype.kind != "U":
+                    raise GraspError(
+                        f"{key}: expected a text scalar, got {value.dtype} {value.shape}"
+                    )
+                value = str(value)
+            if key == "metrics":
+                try:
+                    data[key] = json.loads(value)
+                except ValueError as err:
+                    raise GraspError(f"metrics: not JSON ({err})") from None
             elif key == "joint_names":
+                if value.ndim != 1 or value.dtype.kind != "U":
+                    raise GraspError(f"joint_names: expected a list of names, got {value.dtype}")
                 data[key] = tuple(str(v) for v in value)
             else:
                 data[key] = value
         return cls.from_dict(data)
 
     def save(self, path: str | Path) -> Path:
-        """Write as .json or .npz (chosen by the suffix)."""
-        path = Path(path)
-        if path.suffix == ".json":
-            path.write_text(self.to_json())
-        elif path.suffix == ".npz":
-            np.savez(path, **self.to_arrays())
-        else:
-            raise GraspError(f"{path}: grasp files must end in .json or .npz")
+        """Write as .json or .npz (chosen by the suffix), creating missing folders; through a
+        temporary file, so a failed write leaves no half-written record."""
+        from models.paths import output_file
+
+        path = output_file(path, (".json", ".npz"), "grasp file", GraspError)
+        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp{path.suffix}")
+        try:
+            if path.suffix.lower() == ".json":
+                tmp.write_text(self.to_json())
+            else:
+                with open(tmp, "wb") as f:
+                    np.savez(f, **self.to_arrays())
+            os.replace(tmp, path)
+        except OSError as err:
+            tmp.unlink(missing_ok=True)
+            raise GraspError(f"could not write the grasp file {path}: {err}") from None
         return path
 
     @classmethod
     def load(cls, path: str | Path) -> Grasp:
-        path = Path(path)
-        if not path.is_file():
-            raise GraspError(f"{path}: no such grasp file")
-        if path.suffix == ".json":
-            return cls.from_json(path.read_text())
-        if path.suffix == ".npz":
+        from models.paths import input_file
+
+        path = input_file(path, "grasp file", GraspError)
+        suffix = path.suffix.lower()
+        if suffix not in (".json", ".npz"):
+            raise GraspError(f"{path}: grasp files must end in .json or .npz")
+        try:
+            raw = path.read_bytes()
+        except OSError as err:
+            raise GraspError(f"{path}: cannot read the grasp file ({err.strerror})") from None
+        if not raw:
+            raise GraspError(f"{path} is empty (0 bytes); was it written completely?")
+        if suffix == ".json":
             try:
-                with np.load(path, allow_pickle=False) as npz:
-                    return cls.from_arrays({k: npz[k] for k in npz.files})
-            except ValueError as err:
-                raise GraspError(f"{path}: unreadable grasp NPZ ({err})") from None
-        raise GraspError(f"{path}: grasp files must end in .json or .npz")
+                text = raw.decode("utf-8")
+            except UnicodeDecodeError:
+                raise GraspError(f"{path} is not UTF-8 text; a .json grasp file is JSON") from None
+            try:
+                return cls.from_json(text)
+            except GraspError as err:
+                raise GraspError(f"{path}: {err}") from None
+        try:
+            with np.load(io.BytesIO(raw), allow_pickle=False) as npz:
+                arrays = {k: npz[k] for k in npz.files}
+        except (ValueError, OSError, EOFError, KeyError, zipfile.BadZipFile) as err:
+            raise GraspError(
+                f"{path}: unreadable grasp NPZ ({type(err).__name__}: {err}); is the file "
+                "complete? Write it again with Grasp.save or drograsp plan --out"
+            ) from None
+        try:
+            return cls.from_arrays(arrays)
+        except GraspError as err:
+            raise GraspError(f"{path}: {err}") from None
+
+
+def _jsonable(value: Any, where: str) -> Any:
+    """Plain JSON data: numpy arrays and scalars become lists and numbers; anything else that
+    JSON cannot hold is a GraspError naming where it is."""
+    if isinstance(value, Mapping):
+        return {str(k): _jsonable(v, f"{where}[{k!r}]") for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_jsonable(v, where) for v in value]
+    if isinstance(value, np.ndarray):
+        return _jsonable(value.tolist(), where)
+    if isinstance(value, np.bool_):
+        return bool(value)
+    if isinstance(value, np.integer):
+        return int(value)
+    if isinstance(value, np.floating):
+        return float(value)
+    if value is None or isinstance(value, str | bool | int | float):
+        return value
+    raise GraspError(
+        f"{where}: a {type(value).__name__} cannot be saved; keep metrics to JSON data"
+    )
 
 
 # ---------------------------------------------------------------------- DexGraspBench layout
