@@ -56,9 +56,30 @@ def test_mujoco_warnings_go_into_the_result_not_to_stderr(monkeypatch, capfd):
         return validator.ValidationResult(success=False, reason="slipped")
 
     monkeypatch.setattr(validator, "_validate", unstable)
-    result = validator.validate(None, None, None)
+    z = np.zeros(16)
+    result = validator.validate(Grasp("allegro", [0, 0, 0], [1, 0, 0, 0], z, z, z), None, None)
     assert result.warnings == [
         "Nan, Inf or huge value in QACC at DOF 0. The simulation is unstable."
     ]
     assert "QACC" not in capfd.readouterr().err
     assert mujoco.get_mju_user_warning() is None
+
+
+def test_a_reset_or_non_finite_simulation_is_never_held():
+    """MuJoCo resets the state on NaN, inf or huge values (a wrist 1e12 m away, a force of
+    1e20 N): the object then sits where it started, which must not read as held."""
+    from planner.validation import get_protocol
+
+    box = _box(BOXES[0])
+    pieces = box.collision_pieces()
+    result = FunctionalPlanner("allegro").plan(box, "Hold a box by body")
+    assert result.success
+    grasp = result.grasp
+    far = validate(grasp.moved([1e12, 0.0, 0.0]), pieces, "allegro", "paper")
+    assert not far.success and far.reason == "unstable"
+    assert any("unstable" in w for w in far.warnings)
+    pushed = validate(grasp, pieces, "allegro", get_protocol("paper", force_scale=1e20))
+    assert not pushed.success and pushed.reason == "unstable"
+    assert pushed.directions and pushed.directions[-1].unstable
+    huge = grasp.to_dict() | {"wrist_pos": [1e300, 0.0, 0.0]}
+    assert not validate(Grasp.from_dict(huge), pieces, "allegro", "paper").success

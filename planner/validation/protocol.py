@@ -8,6 +8,7 @@ them, so experiments never need to edit code.
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -26,6 +27,23 @@ DIRECTIONS: tuple[tuple[float, float, float], ...] = (
 
 class ProtocolError(DrograspError, ValueError):
     """Unknown preset or an invalid protocol setting."""
+
+
+# simulation steps of one phase (the closing, or one direction's hold): 500 for DexGraspBench's
+# 2 s hold; the bound keeps a mistyped setting from running for hours
+MAX_STEPS = 100_000
+
+
+def _numbers(name: str, value: Any, size: int, low: float | None) -> tuple[float, ...]:
+    """`value` as `size` finite numbers (each >= `low`), or a ProtocolError."""
+    if not isinstance(value, tuple | list) or len(value) != size:
+        raise ProtocolError(f"protocol {name} needs {size} numbers, got {value!r}")
+    for x in value:
+        if isinstance(x, bool) or not isinstance(x, int | float) or not math.isfinite(x):
+            raise ProtocolError(f"protocol {name} needs {size} finite numbers, got {value!r}")
+        if low is not None and x < low:
+            raise ProtocolError(f"protocol {name} values must be {low} or more, got {value!r}")
+    return tuple(float(x) for x in value)
 
 
 @dataclass(frozen=True)
@@ -90,14 +108,35 @@ class Protocol:
             default, value = f.default, getattr(self, f.name)
             if isinstance(default, bool):
                 ok = isinstance(value, bool)
-            elif isinstance(default, int | float):
+            elif isinstance(default, int):
+                ok = isinstance(value, int) and not isinstance(value, bool)
+            elif isinstance(default, float):
                 ok = isinstance(value, int | float) and not isinstance(value, bool)
+                ok = ok and math.isfinite(value)
+            elif isinstance(default, tuple):
+                ok = isinstance(value, tuple)
             else:
                 ok = isinstance(value, type(default))
             if not ok:
+                finite = " (finite)" if isinstance(default, float) else ""
                 raise ProtocolError(
-                    f"protocol {f.name} must be a {type(default).__name__} like {default!r}, "
-                    f"got {value!r}"
+                    f"protocol {f.name} must be a {type(default).__name__}{finite} like "
+                    f"{default!r}, got {value!r}"
+                )
+        for name, size, low in (
+            ("friction", 2, 0.0),
+            ("hand_solimp", 3, None),
+            ("hand_solref", 2, None),
+            ("weld_solimp", 5, None),
+        ):
+            _numbers(name, getattr(self, name), size, low)
+        if not self.directions:
+            raise ProtocolError("protocol needs at least one force direction")
+        for d in self.directions:
+            vec = _numbers("directions", d, 3, None)
+            if abs(math.hypot(*vec) - 1.0) > 1e-6:
+                raise ProtocolError(
+                    f"protocol force directions must be unit vectors such as (0, 0, -1), got {d}"
                 )
         positive = (
             "timestep",
@@ -107,14 +146,42 @@ class Protocol:
             "check_interval",
             "rest_interval",
             "rest_window",
+            "max_translation",
+            "max_rotation_deg",
         )
         for name in positive:
             if not getattr(self, name) > 0:
                 raise ProtocolError(f"protocol {name} must be positive, got {getattr(self, name)}")
+        non_negative = (
+            "force_scale",
+            "contact_margin",
+            "contact_threshold",
+            "rest_speed",
+            "rest_finger_speed",
+            "noslip_iterations",
+        )
+        for name in non_negative:
+            if getattr(self, name) < 0:
+                raise ProtocolError(f"protocol {name} must be 0 or more, got {getattr(self, name)}")
         if self.waypoints < 1 or self.substeps < 1:
             raise ProtocolError("protocol waypoints and substeps must be at least 1")
-        if not self.directions:
-            raise ProtocolError("protocol needs at least one force direction")
+        for name in ("check_interval", "rest_interval"):
+            if getattr(self, name) < self.timestep:
+                raise ProtocolError(
+                    f"protocol {name} ({getattr(self, name)} s) must be at least one timestep "
+                    f"({self.timestep} s)"
+                )
+        closing = 2 * self.waypoints * self.substeps
+        holding = self.hold_time / self.timestep
+        if closing > MAX_STEPS or holding > MAX_STEPS:
+            raise ProtocolError(
+                f"the protocol would simulate {max(closing, round(holding))} steps per phase "
+                f"(closing: 2 x waypoints x substeps; hold: hold_time / timestep); at most "
+                f"{MAX_STEPS} are allowed: lower waypoints, substeps or hold_time, or raise "
+                "timestep"
+            )
+        if self.condim not in (1, 3, 4, 6):
+            raise ProtocolError(f"protocol condim must be 1, 3, 4 or 6, got {self.condim}")
         if self.integrator not in ("euler", "implicit", "implicitfast", "rk4"):
             raise ProtocolError(f"unknown integrator {self.integrator!r}")
         if self.solver not in ("newton", "cg", "pgs"):
@@ -163,7 +230,10 @@ class Protocol:
     def replace(self, **overrides: Any) -> Protocol:
         unknown = set(overrides) - {f.name for f in dataclasses.fields(self)}
         if unknown:
-            raise ProtocolError(f"unknown protocol settings {sorted(unknown)}")
+            raise ProtocolError(
+                f"unknown protocol settings {sorted(unknown)}; known: "
+                f"{', '.join(f.name for f in dataclasses.fields(self))}"
+            )
         return dataclasses.replace(self, **overrides)
 
 
@@ -178,7 +248,7 @@ def get_protocol(preset: str | Protocol = "dexgraspbench", **overrides: Any) -> 
     if isinstance(preset, Protocol):
         base = preset
     else:
-        if preset not in PRESETS:
+        if not isinstance(preset, str) or preset not in PRESETS:
             raise ProtocolError(f"unknown protocol preset {preset!r}; choose from {list(PRESETS)}")
         base = PRESETS[preset]
     return base.replace(**overrides) if overrides else base

@@ -37,6 +37,7 @@ class DirectionResult:
     rotation_deg: float
     held: bool
     hold_time: float  # s simulated under the force
+    unstable: bool = False  # MuJoCo reset the simulation (or it went non-finite): not held
 
 
 @dataclass
@@ -44,7 +45,10 @@ class ValidationResult:
     """Verdict and measurements of one grasp."""
 
     success: bool
-    reason: str  # "held", "pregrasp_penetration", "pregrasp_self_penetration", or "slipped"
+    # "held", "pregrasp_penetration", "pregrasp_self_penetration", "slipped", or "unstable":
+    # the simulation went non-finite or MuJoCo reset it (a wrist 1e300 m away, say), so where
+    # the object ended says nothing about the grasp
+    reason: str
     directions: list[DirectionResult] = field(default_factory=list)
     translation: float = 0.0  # m, worst over the directions tested
     rotation_deg: float = 0.0  # worst over the directions tested
@@ -56,9 +60,9 @@ class ValidationResult:
     simulated_time: float = 0.0  # s of physics simulated for this grasp
     wall_time: float = 0.0  # s
     # MuJoCo's warnings during the test, e.g. "Nan, Inf or huge value in QACC ... unstable":
-    # MuJoCo then resets the simulation state and the verdict is what the displacement shows
-    # after it (the object leaves the hand); recorded here instead of printed on stderr and
-    # appended to a MUJOCO_LOG.TXT in the working folder.
+    # MuJoCo then resets the simulation state, and the grasp fails as "unstable" (after a reset
+    # the object sits where it started, which would otherwise read as held); recorded here
+    # instead of printed on stderr and appended to a MUJOCO_LOG.TXT in the working folder.
     warnings: list[str] = field(default_factory=list)
 
     def to_dict(self) -> dict[str, Any]:
@@ -69,14 +73,37 @@ class ValidationResult:
 
 # ---------------------------------------------------------------------- geometry helpers
 def _pose(value: Any) -> np.ndarray:
-    pose = np.asarray(IDENTITY_POSE if value is None else value, dtype=np.float64)
-    if pose.shape != (7,) or not np.all(np.isfinite(pose)):
-        from models.errors import ObjectError
+    from models.errors import ObjectError
 
-        raise ObjectError(f"object pose must be 7 finite values (xyz + wxyz), got {pose}")
-    pose = pose.copy()
-    pose[3:] /= np.linalg.norm(pose[3:])
+    try:
+        pose = np.asarray(IDENTITY_POSE if value is None else value)
+        ok = pose.dtype.kind in "iuf"
+    except (TypeError, ValueError):
+        ok = False
+    if not ok or pose.shape != (7,) or not np.all(np.isfinite(pose)):
+        raise ObjectError(f"object pose must be 7 finite numbers (xyz + wxyz), got {value!r}")
+    pose = pose.astype(np.float64)
+    norm = np.linalg.norm(pose[3:])
+    if norm < 1e-8:
+        raise ObjectError(f"object pose: zero quaternion in {value!r} (expected w, x, y, z)")
+    pose[3:] /= norm
     return pose
+
+
+_RESET_WARNINGS = (
+    mujoco.mjtWarning.mjWARN_BADQPOS,
+    mujoco.mjtWarning.mjWARN_BADQVEL,
+    mujoco.mjtWarning.mjWARN_BADQACC,
+)
+
+
+def _unstable(scene: Scene, data: mujoco.MjData) -> bool:
+    """MuJoCo reset the state (its checks found NaN, inf or huge values), or the object's
+    state is not finite: the simulation says nothing about the grasp."""
+    if any(data.warning[int(w)].number > 0 for w in _RESET_WARNINGS):
+        return True
+    q = scene.object_qpos
+    return not bool(np.isfinite(data.qpos[q : q + 7]).all())
 
 
 def _displacement(initial: np.ndarray, current: np.ndarray) -> tuple[float, float]:
@@ -230,9 +257,13 @@ def _hold(
     translation = rotation = 0.0
     held = True
     steps = at_rest = 0
+    unstable = False
     while steps < total:
         mujoco.mj_step(m, data, nstep=chunk)
         steps += chunk
+        if _unstable(scene, data):
+            unstable, held = True, False
+            break
         check = steps % per_check == 0
         rest_check = protocol.rest_speed > 0 and steps % per_rest == 0
         if not (check or rest_check):
@@ -256,6 +287,7 @@ def _hold(
         rotation,
         held,
         steps * protocol.timestep,
+        unstable,
     )
 
 
@@ -314,6 +346,17 @@ def validate(
     `object_pose` (xyz + wxyz, default identity) places the object; `all_directions` overrides
     the protocol's early stop at the first failing direction.
     """
+    if not isinstance(grasp, Grasp):
+        from models.errors import GraspError
+
+        raise GraspError(
+            f"validate needs a models.grasp.Grasp, got {type(grasp).__name__} (Grasp.from_dict "
+            "or Grasp.load make one)"
+        )
+    if all_directions is not None and not isinstance(all_directions, bool):
+        from planner.validation.protocol import ProtocolError
+
+        raise ProtocolError(f"all_directions must be True, False or None, got {all_directions!r}")
     warnings: list[str] = []
     with _mujoco_warnings(warnings):
         result = _validate(grasp, obj, hand, protocol, object_pose, all_directions)
@@ -366,6 +409,8 @@ def _validate(
     simulated = 0.0
     if proto.share_closing:
         simulated += _close(scene, d, grasp, obj_pose, proto)
+        if _unstable(scene, d):
+            return _failed_unstable(result, simulated, start)
     success = True
     for direction in np.asarray(proto.directions, dtype=np.float64):
         if proto.share_closing:
@@ -374,6 +419,8 @@ def _validate(
         else:  # DexGraspBench's way: re-simulate the closing for every direction
             run = scene.scratch
             simulated += _close(scene, run, grasp, obj_pose, proto)
+            if _unstable(scene, run):
+                return _failed_unstable(result, simulated, start)
         outcome = _hold(scene, run, direction, obj_pose, proto)
         simulated += outcome.hold_time
         result.directions.append(outcome)
@@ -381,9 +428,19 @@ def _validate(
         if not outcome.held and not proto.all_directions:
             break
     result.success = success
-    result.reason = "held" if success else "slipped"
+    unstable = any(r.unstable for r in result.directions)
+    result.reason = "held" if success else ("unstable" if unstable else "slipped")
     result.translation = max(r.translation for r in result.directions)
     result.rotation_deg = max(r.rotation_deg for r in result.directions)
+    result.simulated_time = simulated
+    result.wall_time = time.perf_counter() - start
+    return result
+
+
+def _failed_unstable(result: ValidationResult, simulated: float, start: float) -> ValidationResult:
+    """The closing went unstable: no direction is tested, the grasp fails."""
+    result.success = False
+    result.reason = "unstable"
     result.simulated_time = simulated
     result.wall_time = time.perf_counter() - start
     return result
