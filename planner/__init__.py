@@ -11,7 +11,7 @@ __all__ = ["plan_grasp"]
 
 def __getattr__(name: str) -> Any:
     if name == "plan_grasp":
-        from planner.functional import plan_grasp
+        from planner.api import plan_grasp  # planner.functional's, with its arguments checked
 
         return plan_grasp
     raise AttributeError(f"module 'planner' has no attribute {name!r}")
