@@ -24,6 +24,14 @@ Indexed = tuple[int, Job]
 MAX_RAY_ATTEMPTS = 2  # Ray retries a task whose worker died once
 
 
+def _worker_init(parent: int) -> None:
+    """A pool worker: one math thread, and it ends when the batch's process is killed."""
+    from planner.lifeline import die_with
+
+    die_with(parent)
+    _one_thread()
+
+
 def _one_thread() -> None:
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     import torch
@@ -71,7 +79,12 @@ def _pool(workers: int, job_fn: JobFn) -> ProcessPoolExecutor:
     # module once, never from a parent whose torch/OpenMP threads run (fork-unsafe).
     ctx = mp.get_context("forkserver")
     ctx.set_forkserver_preload([job_fn.__module__])
-    return ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_one_thread)
+    return ProcessPoolExecutor(
+        max_workers=workers,
+        mp_context=ctx,
+        initializer=_worker_init,
+        initargs=(os.getpid(),),
+    )
 
 
 def _submit(

@@ -26,8 +26,15 @@ _WORKER: dict[str, Any] = {}
 
 
 def _init_worker(
-    hand: HandAdapter, objects: dict[str, CollisionObject], protocol: Protocol
+    hand: HandAdapter,
+    objects: dict[str, CollisionObject],
+    protocol: Protocol,
+    parent: int | None = None,
 ) -> None:
+    if parent is not None:  # a pool worker: it ends when the process that started it is killed
+        from planner.lifeline import die_with
+
+        die_with(parent)
     _WORKER.update(hand=hand, objects=objects, protocol=protocol)
 
 
@@ -111,7 +118,7 @@ def validate_many(
                 max_workers=min(workers, n),
                 mp_context=ctx,
                 initializer=_init_worker,
-                initargs=(adapter, table, proto),
+                initargs=(adapter, table, proto, os.getpid()),
             ) as pool:
                 futures = [pool.submit(_run_job, i, grasps[i], keys[i], poses[i]) for i in order]
                 for future in as_completed(futures):
