@@ -14,6 +14,7 @@ Written by `planner.batch.dataset` (`drograsp dataset compact|generate`).
 from __future__ import annotations
 
 import json
+import zipfile
 from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
@@ -85,7 +86,15 @@ def read_meta(root: str | Path) -> dict[str, Any]:
             f"{root}: no dataset here (meta.json missing); make one with `drograsp dataset "
             "generate` or `drograsp dataset compact`"
         )
-    meta = json.loads(path.read_text())
+    try:
+        meta = json.loads(path.read_bytes().decode("utf-8"))
+    except (ValueError, OSError) as err:
+        raise DatasetError(
+            f"{path} is damaged ({type(err).__name__}: {err}); restore it (e.g. `git checkout "
+            "-- meta.json` for a committed dataset) or make the dataset again"
+        ) from None
+    if not isinstance(meta, dict):
+        raise DatasetError(f"{path} is damaged (not a JSON object); restore it or make it again")
     if meta.get("format") != FORMAT:
         raise DatasetError(f"{path}: format {meta.get('format')!r}, this code reads {FORMAT!r}")
     return meta
@@ -99,8 +108,14 @@ def _read_block(root: str | Path, name: str, dof: int) -> dict[str, np.ndarray]:
     path = block_path(root, name)
     if not path.is_file():
         raise DatasetError(f"{path} missing: the dataset folder is incomplete")
-    with np.load(path, allow_pickle=False) as npz:
-        arrays = {k: npz[k] for k in npz.files}
+    try:
+        with np.load(path, allow_pickle=False) as npz:
+            arrays = {k: npz[k] for k in npz.files}
+    except (ValueError, OSError, EOFError, KeyError, zipfile.BadZipFile) as err:
+        raise DatasetError(
+            f"{path} is damaged ({type(err).__name__}: {err}); restore it (`git checkout` for "
+            "a committed dataset) or make its block again (`drograsp dataset generate` resumes)"
+        ) from None
     missing = set(ARRAYS) - set(arrays)
     if missing:
         raise DatasetError(f"{path} lacks arrays {sorted(missing)}")

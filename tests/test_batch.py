@@ -13,6 +13,7 @@ from pathlib import Path
 
 import pytest
 
+from models.errors import DrograspError
 from planner import cli
 from planner.batch import Job, JobError, make_jobs, read_jobs, read_results, run_batch, write_jobs
 from planner.batch.runner import job_key, shard_path
@@ -277,3 +278,95 @@ def test_cli_jobs_make_and_batch(tmp_path, capsys, monkeypatch):
     out = capsys.readouterr()
     assert json.loads(out.out[out.out.index("{") :])["jobs"] == 10
     assert "cannot load job function" in out.err
+
+
+def _processes_with(marker: str) -> list[int]:
+    """Pids of live processes whose environment holds `marker` (this test's batch and the
+    workers it started)."""
+    pids = []
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            if marker.encode() in (entry / "environ").read_bytes():
+                stat = (entry / "stat").read_text()
+                if stat.rsplit(")", 1)[1].split()[0] != "Z":  # zombies are gone already
+                    pids.append(int(entry.name))
+        except OSError:
+            continue
+    return pids
+
+
+@pytest.mark.skipif(not Path("/proc").is_dir(), reason="reads /proc")
+def test_killing_the_batch_ends_its_workers(tmp_path):
+    """kill -9 of `drograsp batch` alone (not its process group): its pool workers end too,
+    instead of running on (about 385 MB each with the planner)."""
+    jobs_file = write_jobs(fake_jobs(8), tmp_path / "jobs.jsonl")
+    marker = f"DROGRASP_TEST_MARKER={os.getpid()}_{time.monotonic_ns()}"
+    code = "import sys; from planner import cli; sys.exit(cli.main(sys.argv[1:]))"
+    argv = [sys.executable, "-c", code, "batch", str(jobs_file), str(tmp_path / "out")]
+    argv += ["--workers", "2", "--job-fn", "tests.batch_fakes:fake_solve", "--no-progress"]
+    key, value = marker.split("=")
+    env = dict(os.environ, BATCH_FAKE_SLEEP="60", PYTHONPATH=str(REPO), **{key: value})
+    proc = subprocess.Popen(argv, cwd=REPO, env=env)
+    try:
+        deadline = time.monotonic() + 120
+        while len(_processes_with(marker)) < 4:  # the batch, the forkserver, two workers
+            assert proc.poll() is None, "the batch ended early"
+            assert time.monotonic() < deadline, "the workers did not start within 120 s"
+            time.sleep(0.2)
+        time.sleep(0.5)  # the workers are in their jobs
+    finally:
+        proc.kill()
+        proc.wait()
+    deadline = time.monotonic() + 15
+    while _processes_with(marker) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    left = _processes_with(marker)
+    for pid in left:  # do not leave them behind if the test fails
+        os.kill(pid, signal.SIGKILL)
+    assert not left, f"{len(left)} worker processes outlived the killed batch"
+
+
+@pytest.mark.parametrize("damage", ["shard", "batch.json", "utf8"])
+def test_a_damaged_batch_file_is_named_with_how_to_recover(tmp_path, damage):
+    jobs = fake_jobs(4)
+    run_batch(jobs, tmp_path, shard_size=2, job_fn=fake_solve, progress=False)
+    if damage == "shard":
+        path = shard_path(tmp_path, 0)
+        path.write_text(path.read_text()[:-30])  # cut mid-line, as by a full disk
+    elif damage == "utf8":
+        path = shard_path(tmp_path, 1)
+        path.write_bytes(b"\xff\xfe garbage\n")
+    else:
+        path = tmp_path / "batch.json"
+        path.write_text(path.read_text()[:10])
+    with pytest.raises(JobError, match=f"{path.name} is damaged.*delete it and re-run"):
+        run_batch(jobs, tmp_path, shard_size=2, job_fn=fake_solve, progress=False)
+    path.unlink()  # what the message says: delete it and re-run
+    summary = run_batch(jobs, tmp_path, shard_size=2, job_fn=fake_solve, progress=False)
+    assert summary.jobs == 4 and [r["id"] for r in read_results(tmp_path)] == [j.id for j in jobs]
+
+
+def test_jobs_are_checked_field_by_field(tmp_path):
+    base = {"object": {"category": "mug", "seed": 0}, "instruction": "Use a mug by handle"}
+    base["hand"] = "allegro"
+    for change in (
+        {"variant": "x"},
+        {"variant": True},
+        {"max_candidates": 1.5},
+        {"hand": 5},
+        {"object": {"category": "mug", "seed": "a"}},
+        {"object": {"category": "mug", "seed": 1.5}},
+    ):
+        with pytest.raises(JobError):
+            Job.from_dict(base | change)
+    path = tmp_path / "bad.jsonl"
+    path.write_bytes(b"\xff\xfe{}\n")
+    with pytest.raises(JobError, match="not UTF-8"):
+        read_jobs(path)
+    path.write_text(json.dumps(base) + "\n" + json.dumps(base | {"variant": -1}) + "\n")
+    with pytest.raises(JobError, match=r"bad.jsonl:2: job variant"):
+        read_jobs(path)
+    with pytest.raises(DrograspError, match="unknown hand 'unicorn'"):
+        make_jobs(hands=["unicorn"], objects_per_category=1)

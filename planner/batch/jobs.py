@@ -16,8 +16,8 @@ from pathlib import Path
 from typing import Any
 
 from models.errors import DrograspError
-from models.hands import available_hands
-from models.objects import SPLITS, categories, instructions, seeds
+from models.hand_names import builtin_hands, check_hand_name
+from models.objects.names import SPLITS
 
 
 class JobError(DrograspError, ValueError):
@@ -29,12 +29,27 @@ def _slug(text: str) -> str:
 
 
 def object_name(ref: dict[str, Any]) -> str:
-    """A short name for an object reference: `mug_00003` or a mesh file's stem."""
+    """A short name for an object reference: `mug_00003`, a mesh file's stem, or the name of
+    an object given inline."""
     if "category" in ref:
-        return f"{ref['category']}_{int(ref.get('seed', 0)):05d}"
+        seed = ref.get("seed", 0)
+        if (
+            not isinstance(ref["category"], str)
+            or isinstance(seed, bool)
+            or not isinstance(seed, int)
+            or seed < 0
+        ):
+            raise JobError(
+                f"object reference {ref}: category must be a name and seed a non-negative integer"
+            )
+        return f"{ref['category']}_{seed:05d}"
     if "path" in ref:
+        if not isinstance(ref["path"], str) or not ref["path"]:
+            raise JobError(f"object reference {ref}: path must be a file name")
         return Path(ref["path"]).stem
-    raise JobError(f"object reference {ref} has neither category+seed nor path")
+    if "name" in ref and isinstance(ref["name"], str) and ("cloud" in ref or "vertices" in ref):
+        return _slug(ref["name"]) or "object"
+    raise JobError(f"object reference {ref} has neither category+seed, path nor inline geometry")
 
 
 @dataclass(frozen=True)
@@ -57,11 +72,21 @@ class Job:
         if not isinstance(self.object, dict):
             raise JobError(f"job object must be a dict reference, got {self.object!r}")
         object_name(self.object)
-        if not self.instruction or not self.hand:
-            raise JobError(f"job needs an instruction and a hand: {self!r}")
-        if self.variant < 0 or self.max_candidates < 1:
-            raise JobError(f"job variant must be >= 0 and max_candidates >= 1: {self!r}")
-        if self.source is not None and not {"id", "hand", "grasp"} <= set(self.source):
+        for name in ("instruction", "hand", "protocol"):
+            value = getattr(self, name)
+            if not isinstance(value, str) or not value.strip():
+                raise JobError(f"job {name} must be a non-empty string, got {value!r}")
+        for name, low in (("variant", 0), ("max_candidates", 1)):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < low:
+                raise JobError(f"job {name} must be a whole number >= {low}, got {value!r}")
+        if not isinstance(self.validate_all, bool):
+            raise JobError(f"job validate_all must be true or false, got {self.validate_all!r}")
+        if not isinstance(self.id, str):
+            raise JobError(f"job id must be a string, got {self.id!r}")
+        if self.source is not None and (
+            not isinstance(self.source, dict) or not {"id", "hand", "grasp"} <= set(self.source)
+        ):
             raise JobError("a transfer job's source needs id, hand and grasp")
         if not self.id:
             object.__setattr__(self, "id", self.default_id())
@@ -110,11 +135,20 @@ def write_jobs(jobs: Iterable[Job], path: str | Path) -> Path:
 
 def read_jobs(path: str | Path) -> list[Job]:
     """Read a JSONL jobs file; blank lines and lines starting with # are skipped."""
-    path = Path(path)
-    if not path.is_file():
+    from models.paths import input_file
+
+    if isinstance(path, str | Path) and not Path(path).expanduser().exists():
         raise JobError(f"{path}: no such jobs file (make one with `drograsp jobs make`)")
+    path = input_file(path, "jobs file", JobError)
+    try:
+        text = path.read_bytes().decode("utf-8")
+    except UnicodeDecodeError as err:
+        raise JobError(
+            f"{path} is not UTF-8 text (byte {err.start}); a jobs file is JSON lines: make it "
+            "again with `drograsp jobs make`"
+        ) from None
     jobs = []
-    for n, line in enumerate(path.read_text().splitlines(), 1):
+    for n, line in enumerate(text.splitlines(), 1):
         if not line.strip() or line.lstrip().startswith("#"):
             continue
         try:
@@ -123,7 +157,10 @@ def read_jobs(path: str | Path) -> list[Job]:
             raise JobError(f"{path}:{n}: not JSON ({err})") from None
         if not isinstance(data, dict):
             raise JobError(f"{path}:{n}: a job must be a JSON object")
-        jobs.append(Job.from_dict(data))
+        try:
+            jobs.append(Job.from_dict(data))
+        except JobError as err:
+            raise JobError(f"{path}:{n}: {err}") from None
     check_unique(jobs)
     return jobs
 
@@ -156,13 +193,24 @@ def make_jobs(
     hand, instruction and variant: a worker reuses the (hand, object) program it just built, and
     a batch stopped part-way has covered every category alike.
     """
-    hands = list(hands or available_hands())
+    from models.objects import categories, category, instructions, seeds
+
+    for what, value in (("hands", hands), ("splits", splits), ("category_names", category_names)):
+        if isinstance(value, str):
+            raise JobError(f"{what} must be a list of names such as [{value!r}], not a string")
+    hands = [check_hand_name(h) for h in (hands or builtin_hands())]
     unknown = set(splits) - set(SPLITS)
     if unknown:
         raise JobError(f"unknown splits {sorted(unknown)}; choose from {SPLITS}")
-    names = list(category_names or categories())
-    if variants < 1 or objects_per_category < 1:
-        raise JobError("variants and objects_per_category must be at least 1")
+    names = [category(c).name for c in (category_names or categories())]
+    for what, value, low in (
+        ("variants", variants, 1),
+        ("objects_per_category", objects_per_category, 1),
+        ("start_seed", start_seed, 0),
+        ("max_candidates", max_candidates, 1),
+    ):
+        if isinstance(value, bool) or not isinstance(value, int) or value < low:
+            raise JobError(f"{what} must be a whole number >= {low}, got {value!r}")
     objects = []
     for name in names:
         chosen = set()

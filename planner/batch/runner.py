@@ -22,6 +22,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
+from models.paths import output_folder
 from planner.batch.executors import JobFn, run_pool, run_ray, run_serial
 from planner.batch.jobs import Job, JobError, check_unique
 
@@ -90,7 +91,7 @@ def _check_folder(out_dir: Path, jobs: Sequence[Job], shard_size: int) -> None:
     }
     path = out_dir / "batch.json"
     if path.exists():
-        old = json.loads(path.read_text())
+        old = _read_json(path, "the batch's description (jobs digest, shard size)")
         if old != meta:
             raise JobError(
                 f"{out_dir} holds results of a different batch ({old.get('jobs')} jobs, shard "
@@ -98,12 +99,43 @@ def _check_folder(out_dir: Path, jobs: Sequence[Job], shard_size: int) -> None:
                 "and shard size"
             )
         return
-    (out_dir / "shards").mkdir(parents=True, exist_ok=True)
+    output_folder(out_dir / "shards", "batch output folder", JobError)
     write_atomic(path, json.dumps(meta, indent=1) + "\n")
 
 
+def _read_json(path: Path, what: str) -> dict[str, Any]:
+    """A JSON object file of the batch folder, or a JobError naming it and how to recover."""
+    try:
+        data = json.loads(path.read_bytes().decode("utf-8"))
+    except (ValueError, OSError) as err:
+        data, reason = None, f"{type(err).__name__}: {err}"
+    else:
+        reason = "not a JSON object"
+    if not isinstance(data, dict):
+        raise JobError(
+            f"{path} is damaged ({reason}); it holds {what}: delete it and re-run the same "
+            "command (finished shards of the same jobs are kept)"
+        )
+    return data
+
+
 def read_shard(path: Path) -> list[dict[str, Any]]:
-    return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+    """The records of one shard, or a JobError naming it (a shard truncated by a full disk or
+    edited by hand) with how to recover."""
+    try:
+        lines = path.read_bytes().decode("utf-8").splitlines()
+        records = [json.loads(line) for line in lines if line.strip()]
+    except (ValueError, OSError) as err:
+        raise JobError(
+            f"{path} is damaged ({type(err).__name__}: {err}); delete it and re-run the same "
+            "`drograsp batch` command: only its jobs run again"
+        ) from None
+    if not all(isinstance(r, dict) and "id" in r for r in records):
+        raise JobError(
+            f"{path} is damaged (a line is not a job record); delete it and re-run the same "
+            "`drograsp batch` command: only its jobs run again"
+        )
+    return records
 
 
 def _finished_shards(out_dir: Path, jobs: Sequence[Job], shard_size: int) -> set[int]:
@@ -144,8 +176,9 @@ def run_batch(
         from planner.batch.solve import solve_job
 
         job_fn = solve_job
-    if workers < 1 or shard_size < 1:
-        raise JobError("workers and shard size must be at least 1")
+    for what, value in (("workers", workers), ("shard size", shard_size)):
+        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+            raise JobError(f"{what} must be a whole number of at least 1, got {value!r}")
     check_unique(jobs)
     out = Path(out_dir)
     _check_folder(out, jobs, shard_size)
@@ -203,9 +236,20 @@ def _progress(total: int, initial: int, enabled: bool):
 
 
 def read_results(out_dir: str | Path) -> Iterator[dict[str, Any]]:
-    """Every record of the finished shards, in job order."""
+    """Every record of the finished shards, in job order (none where the folder is absent)."""
     for path in sorted((Path(out_dir) / "shards").glob("shard-*.jsonl")):
         yield from read_shard(path)
+
+
+def check_results_folder(out_dir: str | Path) -> Path:
+    """A folder written by `run_batch`, or a JobError saying what it is instead."""
+    folder = Path(out_dir)
+    if not (folder / "shards").is_dir():
+        raise JobError(
+            f"{out_dir} holds no batch results (no shards folder); give the OUT_DIR of a "
+            "`drograsp batch` run"
+        )
+    return folder
 
 
 def _summarize(
