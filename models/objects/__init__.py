@@ -34,7 +34,7 @@ _WHERE: dict[str, str] = {
     "parse_instruction": "instructions",
     "CATEGORIES": "library",
     "Category": "library",
-    "categories": "library",
+    "categories": "names",
     "category": "library",
     "load_object": "loading",
     "ObjectModel": "model",

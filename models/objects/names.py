@@ -24,3 +24,8 @@ CATEGORY_NAMES: tuple[str, ...] = (
 )
 HELDOUT: tuple[str, ...] = ("teapot", "screwdriver")
 SPLITS: tuple[str, ...] = ("train", "val", "test", "heldout")
+
+
+def categories() -> tuple[str, ...]:
+    """Names of every category in the library, in a fixed order (as `library.categories`)."""
+    return CATEGORY_NAMES
