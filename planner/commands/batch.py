@@ -5,11 +5,14 @@ from __future__ import annotations
 import argparse
 import importlib
 import json
+from typing import Any
 
-from planner.batch import JobError, read_jobs, run_batch
-from planner.batch.executors import JobFn
-from planner.batch.runner import SHARD_SIZE
+from models.errors import DrograspError
+from models.paths import output_folder
+from planner.commands.args import positive_int
 from planner.commands.jobs import add_backend_arguments
+
+SHARD_SIZE = 16  # planner.batch.runner.SHARD_SIZE (checked in tests)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -18,14 +21,15 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="solve a jobs file offline (local process pool or Ray), resumably",
         description="Run every job of JOBS_FILE (make one with `drograsp jobs make`) and write "
         "result shards to OUT_DIR. Re-running the same command skips finished shards; a job "
-        "that raises is recorded with its error; results do not depend on the worker count.",
+        "that raises is recorded with its error; results do not depend on the worker count. "
+        "Exit code 0: some job's grasp holds; 1: none does; 2: bad input.",
     )
     p.add_argument("jobs", metavar="JOBS_FILE")
     p.add_argument("out", metavar="OUT_DIR")
     add_backend_arguments(p)
     p.add_argument(
         "--shard-size",
-        type=int,
+        type=positive_int,
         default=SHARD_SIZE,
         help=f"jobs per result shard (default {SHARD_SIZE}); fixed for an OUT_DIR",
     )
@@ -38,26 +42,33 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def load_job_fn(spec: str) -> JobFn:
-    module, _, name = spec.partition(":")
+def load_job_fn(spec: str) -> Any:
+    module, sep, name = spec.partition(":")
+    if not sep or not module or not name:
+        raise DrograspError(f"--job-fn {spec!r}: give MODULE:FUNCTION, e.g. mypkg.jobs:solve")
     try:
         fn = getattr(importlib.import_module(module), name)
     except (ImportError, AttributeError, ValueError) as err:
-        raise JobError(f"cannot load job function {spec!r} (MODULE:FUNCTION): {err}") from None
+        raise DrograspError(f"cannot load job function {spec!r} (MODULE:FUNCTION): {err}") from None
     if not callable(fn):
-        raise JobError(f"{spec} is not callable")
+        raise DrograspError(f"{spec} is not callable")
     return fn
 
 
 def run(args: argparse.Namespace) -> int:
+    from planner.batch import read_jobs, run_batch
+
+    jobs = read_jobs(args.jobs)
+    output_folder(args.out, "batch output folder")
+    job_fn = load_job_fn(args.job_fn) if args.job_fn else None
     summary = run_batch(
-        read_jobs(args.jobs),
+        jobs,
         args.out,
         workers=args.workers,
         ray=args.ray,
         ray_address=args.ray_address,
         shard_size=args.shard_size,
-        job_fn=load_job_fn(args.job_fn) if args.job_fn else None,
+        job_fn=job_fn,
         progress=not args.no_progress,
     )
     if args.json:
@@ -69,4 +80,4 @@ def run(args: argparse.Namespace) -> int:
             f"in {s.wall_time:.1f} s): {s.success} hold, {s.valid} valid (hold and touch the "
             f"instructed part), {s.errors} errors; {s.valid_per_hour:.0f} valid grasps/hour"
         )
-    return 0
+    return 0 if summary.success or not summary.jobs else 1

@@ -8,7 +8,10 @@ import shlex
 import sys
 from pathlib import Path
 
-from planner.commands.jobs import add_backend_arguments, add_job_arguments
+from models.objects.names import CATEGORY_NAMES
+from models.paths import input_folder, output_folder
+from planner.commands.args import non_negative_int, positive_int
+from planner.commands.jobs import add_backend_arguments, add_job_arguments, hands_arg
 
 # Dataset v1 lives in the source checkout (objects regenerate from seeds; the installed package
 # does not carry it): the default is relative to the current folder, the checkout's root.
@@ -37,7 +40,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--no-transfer", action="store_true", help="skip cross-hand transfers")
     g.add_argument(
         "--transfer-per-pair",
-        type=int,
+        type=non_negative_int,
         default=1,
         metavar="N",
         help="source grasps per object, instruction and hand that seed other hands (default 1; "
@@ -45,7 +48,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     g.add_argument(
         "--block-seeds",
-        type=int,
+        type=positive_int,
         default=1,
         metavar="N",
         help="seeds per block (default 1): each finished block is added to OUT_DIR at once, so "
@@ -53,7 +56,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     g.add_argument(
         "--extra-variants",
-        type=int,
+        type=non_negative_int,
         default=0,
         metavar="N",
         help="N more variants for each object, instruction and hand whose variants found no "
@@ -70,7 +73,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "results are taken from the blocks' work folders where present. Re-running resumes.",
     )
     r.add_argument("root", metavar="DIR")
-    r.add_argument("--categories", nargs="+", required=True, metavar="NAME")
+    r.add_argument("--categories", nargs="+", required=True, metavar="NAME", choices=CATEGORY_NAMES)
     r.add_argument("--work", metavar="DIR", help="jobs and result shards (default DIR/work)")
     add_backend_arguments(r)
     r.set_defaults(func=run_refresh)
@@ -97,10 +100,12 @@ def _command() -> str:
 
 
 def run_generate(args: argparse.Namespace) -> int:
+    hands = hands_arg(args.hands)
+    output_folder(args.out, "dataset folder")
     from planner.batch.generate import GenerateSettings, generate_dataset
 
     settings = GenerateSettings(
-        hands=args.hands,
+        hands=hands,
         splits=args.splits,
         category_names=args.categories,
         objects_per_category=args.objects_per_category,
@@ -125,6 +130,7 @@ def run_generate(args: argparse.Namespace) -> int:
 
 
 def run_refresh(args: argparse.Namespace) -> int:
+    input_folder(args.root, "dataset folder")
     from planner.batch.generate import refresh_dataset
 
     info = refresh_dataset(
@@ -142,6 +148,11 @@ def run_refresh(args: argparse.Namespace) -> int:
 
 
 def run_compact(args: argparse.Namespace) -> int:
+    from planner.batch.runner import check_results_folder
+
+    for folder in args.results:
+        check_results_folder(input_folder(folder, "batch results folder"))
+    output_folder(args.out, "dataset folder (--out)")
     from planner.batch.dataset import compact
 
     print_info(compact(args.results, args.out, _command()))
@@ -149,6 +160,7 @@ def run_compact(args: argparse.Namespace) -> int:
 
 
 def run_info(args: argparse.Namespace) -> int:
+    input_folder(args.root, "dataset folder")
     from learned.dataset import dataset_info
 
     info = dataset_info(args.root)

@@ -4,14 +4,11 @@ from __future__ import annotations
 
 import argparse
 import html
+import sys
 import time
-from pathlib import Path
 
-from models.hands import available_hands, load_hand
-from models.objects import make_object
-from planner.functional import FunctionalPlanner
-from planner.objectref import object_ref
-from planner.viewer import write_html
+from models.hand_names import builtin_hands, check_hand_name
+from models.paths import output_folder, write_text_atomic
 
 # (category, seed, instruction): one of them is the paper's running example
 DEMO_TASKS = (("mug", 3, "Use a mug by handle"), ("bottle", 1, "Hold a bottle by body"))
@@ -33,13 +30,25 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    hands = [check_hand_name(h) for h in (args.hands or builtin_hands())]
+    out = output_folder(args.out, "demo folder (--out)")
+
+    from models.hands import load_hand
+    from models.objects import make_object
+    from planner.functional import FunctionalPlanner
+    from planner.objectref import object_ref
+    from planner.viewer import write_html
+
+    print(
+        f"planning {len(DEMO_TASKS)} instructions with {len(hands)} hands (a few seconds each)",
+        file=sys.stderr,
+        flush=True,
+    )
     rows = []
     header = f"{'hand':<8} {'instruction':<24} {'success':<8} {'part touched':<13} {'time s':>7}"
     print(header)
     print("-" * len(header))
-    for hand_name in args.hands or available_hands():
+    for hand_name in hands:
         hand = load_hand(hand_name)
         planner = FunctionalPlanner(hand)
         for category, seed, text in DEMO_TASKS:
@@ -59,8 +68,7 @@ def run(args: argparse.Namespace) -> int:
                 f"{result.part_touched or '-':<13} {elapsed:>7.2f}",
                 flush=True,
             )
-    index = out / "index.html"
-    index.write_text(_index_page(rows))
+    index = write_text_atomic(out / "index.html", _index_page(rows), "demo index page")
     held = sum(r[2] for r in rows)
     print(f"\n{held}/{len(rows)} grasps hold; open {index} to see them")
     return 0 if held else 1

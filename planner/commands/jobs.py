@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import argparse
 from collections import Counter
-from pathlib import Path
 
-from models.hands import available_hands
-from models.objects import SPLITS, categories
-from planner.batch import make_jobs, read_results, write_jobs
+from models.hand_names import builtin_hands, check_hand_name
+from models.objects.names import CATEGORY_NAMES, SPLITS
+from models.paths import input_folder, output_file
+from planner.commands.args import PRESET_NAMES, non_negative_int, positive_int
+
+JOBS_SUFFIXES = (".jsonl",)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -28,10 +30,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     t = jsub.add_parser("transfer", help="every valid grasp of a batch seeds the other hands")
     t.add_argument("results", metavar="RESULTS_DIR", help="OUT_DIR of a finished batch")
     t.add_argument("out", metavar="OUT.jsonl")
-    t.add_argument("--hands", nargs="+", default=available_hands(), metavar="HAND")
+    t.add_argument("--hands", nargs="+", default=None, metavar="HAND")
     t.add_argument(
         "--per-pair",
-        type=int,
+        type=positive_int,
         metavar="N",
         help="at most N source grasps per object, instruction and source hand",
     )
@@ -41,37 +43,57 @@ def register(sub: argparse._SubParsersAction) -> None:
 def add_job_arguments(p: argparse.ArgumentParser, splits: list[str], variants: int) -> None:
     """Which jobs to make: shared by `jobs make` and `dataset generate`."""
     p.add_argument("--split", nargs="+", default=splits, choices=SPLITS, dest="splits")
-    p.add_argument("--categories", nargs="+", choices=categories(), metavar="CATEGORY")
-    p.add_argument("--hands", nargs="+", default=available_hands(), metavar="HAND")
+    p.add_argument("--categories", nargs="+", choices=CATEGORY_NAMES, metavar="CATEGORY")
+    p.add_argument(
+        "--hands", nargs="+", default=None, metavar="HAND", help="default: every built-in hand"
+    )
     p.add_argument(
         "--objects-per-category",
-        type=int,
+        type=positive_int,
         default=10,
         metavar="N",
         help="seeds START..START+N-1 of each category, kept where their split is asked for",
     )
-    p.add_argument("--start-seed", type=int, default=0)
+    p.add_argument("--start-seed", type=non_negative_int, default=0)
     p.add_argument(
-        "--variants", type=int, default=variants, help="grasps with varied wrist poses per pair"
+        "--variants",
+        type=positive_int,
+        default=variants,
+        help="grasps with varied wrist poses per pair",
     )
     p.add_argument(
-        "--candidates", type=int, default=8, help="grasps each job may validate (default 8)"
+        "--candidates",
+        type=positive_int,
+        default=8,
+        help="grasps each job may validate (default 8)",
     )
-    p.add_argument("--preset", default="paper", help="validation preset (default paper)")
+    p.add_argument(
+        "--preset", default="paper", choices=PRESET_NAMES, help="validation preset (default paper)"
+    )
 
 
 def add_backend_arguments(p: argparse.ArgumentParser) -> None:
     """Where jobs run: shared by `batch` and `dataset generate`."""
-    p.add_argument("--workers", type=int, default=1, help="local processes or Ray CPUs (default 1)")
+    p.add_argument(
+        "--workers", type=positive_int, default=1, help="local processes or Ray CPUs (default 1)"
+    )
     where = p.add_mutually_exclusive_group()
     where.add_argument("--ray", action="store_true", help="start a local Ray instance")
     where.add_argument("--ray-address", metavar="ADDR", help="join a running Ray cluster")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
+def hands_arg(hands: list[str] | None) -> list[str]:
+    """--hands, each a built-in hand or a hand folder (default: every built-in hand)."""
+    return [check_hand_name(h) for h in (hands or builtin_hands())]
+
+
 def run_make(args: argparse.Namespace) -> int:
+    out = output_file(args.out, JOBS_SUFFIXES, "jobs file")
+    from planner.batch import make_jobs, write_jobs
+
     jobs = make_jobs(
-        hands=args.hands,
+        hands=hands_arg(args.hands),
         splits=args.splits,
         category_names=args.categories,
         objects_per_category=args.objects_per_category,
@@ -80,7 +102,7 @@ def run_make(args: argparse.Namespace) -> int:
         max_candidates=args.candidates,
         protocol=args.preset,
     )
-    write_jobs(jobs, args.out)
+    write_jobs(jobs, out)
     per_hand = Counter(j.hand for j in jobs)
     print(
         f"wrote {len(jobs)} jobs to {args.out} ({', '.join(f'{h} {n}' for h, n in sorted(per_hand.items()))})"
@@ -89,9 +111,14 @@ def run_make(args: argparse.Namespace) -> int:
 
 
 def run_transfer(args: argparse.Namespace) -> int:
+    hands = hands_arg(args.hands)
+    out = output_file(args.out, JOBS_SUFFIXES, "jobs file")
+    results = input_folder(args.results, "batch results folder")
+    from planner.batch import read_results, write_jobs
+    from planner.batch.runner import check_results_folder
     from planner.batch.transfer import transfer_jobs  # loads the planner: only when asked
 
-    jobs = transfer_jobs(read_results(Path(args.results)), args.hands, args.per_pair)
-    write_jobs(jobs, args.out)
+    jobs = transfer_jobs(read_results(check_results_folder(results)), hands, args.per_pair)
+    write_jobs(jobs, out)
     print(f"wrote {len(jobs)} transfer jobs to {args.out}")
     return 0

@@ -1,32 +1,68 @@
-"""`drograsp plan`: plan one functional grasp and write it."""
+"""`drograsp plan`: plan one functional grasp and write it.
+
+Every argument is checked before the work (the `--out` file's folder and format included), so
+a bad one costs nothing and a finished plan is never lost. Exit code 0: a grasp holds; 1: none
+holds; 2: bad input.
+"""
 
 from __future__ import annotations
 
 import argparse
 import json
+import sys
+import tempfile
 from pathlib import Path
+from typing import Any
 
 from models.errors import DrograspError
-from models.objects import categories, make_object
-from planner.functional import FunctionalPlanner, PlannerSettings, PlanResult
-from planner.objectref import load_labelled, object_ref
+from models.hand_names import check_hand_name
+from models.objects.names import CATEGORY_NAMES
+from models.paths import output_file
+from planner.commands.args import PRESET_NAMES, non_negative_int, positive_int
+
+GRASP_SUFFIXES = (".json", ".npz")
 
 
 def add_object_arguments(p: argparse.ArgumentParser) -> None:
     """--object/--seed for a library object, or --mesh/--part-labels for your own."""
     group = p.add_mutually_exclusive_group(required=True)
     group.add_argument(
-        "--object", choices=categories(), metavar="CATEGORY", help="library category"
+        "--object", choices=CATEGORY_NAMES, metavar="CATEGORY", help="library category"
     )
     group.add_argument("--mesh", metavar="FILE", help="your mesh or point cloud (metres)")
-    p.add_argument("--seed", type=int, default=0, help="library instance (default 0)")
-    p.add_argument("--part-labels", metavar="FILE", help="part labels JSON for --mesh")
+    p.add_argument("--seed", type=non_negative_int, default=0, help="library instance (default 0)")
+    p.add_argument(
+        "--part-labels",
+        metavar="FILE",
+        help="part labels JSON for --mesh (`drograsp objects label MESH OUT.json` writes one)",
+    )
+    p.add_argument(
+        "--pieces",
+        choices=("auto", "coacd", "surface"),
+        default="auto",
+        help="collision pieces of --mesh: auto (CoACD for a watertight mesh, surface pieces "
+        "for an open one), coacd, or surface (fast, from surface samples)",
+    )
 
 
-def object_from_args(args: argparse.Namespace):
+def check_object_arguments(parser_name: str, args: argparse.Namespace) -> None:
+    if args.part_labels and not args.mesh:
+        raise DrograspError(
+            f"--part-labels labels --mesh; a library object (--object) has its own parts "
+            f"(drograsp {parser_name})"
+        )
+
+
+def object_from_args(args: argparse.Namespace) -> Any:
+    from models.objects import make_object
+    from planner.objectref import load_labelled
+
     if args.object:
         return make_object(args.object, args.seed)
-    return load_labelled(args.mesh, args.part_labels)
+    obj = load_labelled(args.mesh, args.part_labels)
+    if obj.mesh is not None:
+        obj.pieces = getattr(args, "pieces", "auto")
+    return obj
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -34,19 +70,24 @@ def register(sub: argparse._SubParsersAction) -> None:
         "plan",
         help="plan a functional grasp for an object, an instruction and a hand",
         description="Propose wrist poses and anchors on the instructed part, solve the Drake "
-        "grasp program, validate in MuJoCo, and write the best grasp that holds.",
+        "grasp program, validate in MuJoCo, and write the best grasp that holds. Exit code 0: "
+        "a grasp holds; 1: none holds; 2: bad input.",
     )
     add_object_arguments(p)
     p.add_argument("--text", required=True, help='instruction, e.g. "Use a mug by handle"')
     p.add_argument("--hand", default="shadow", help="built-in hand name or hand folder")
     p.add_argument("--out", metavar="FILE", help="write the grasp (.json or .npz)")
-    p.add_argument("--candidates", type=int, default=8, help="proposals to try (default 8)")
-    p.add_argument("--preset", default="paper", help="validation preset (default paper)")
+    p.add_argument(
+        "--candidates", type=positive_int, default=8, help="grasps validated at most (default 8)"
+    )
+    p.add_argument(
+        "--preset", default="paper", choices=PRESET_NAMES, help="validation preset (default paper)"
+    )
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.set_defaults(func=run)
 
 
-def print_summary(result: PlanResult) -> None:
+def print_summary(result: Any) -> None:
     s = result.summary()
     status = "holds" if s["success"] else "NO GRASP FOUND"
     print(f"{s['hand']}: {s['instruction']}: {status}")
@@ -69,9 +110,46 @@ def print_summary(result: PlanResult) -> None:
         print(f"  note: {note}")
 
 
+def save_result(grasp: Any, out: Path) -> Path:
+    """Write the grasp; if that fails after all (a full disk), keep it in a temporary file and
+    say where, so the work is not lost."""
+    try:
+        return grasp.save(out)
+    except DrograspError as err:
+        fd, spare = tempfile.mkstemp(prefix="drograsp_grasp_", suffix=out.suffix)
+        import os
+
+        os.close(fd)
+        grasp.save(spare)
+        raise DrograspError(f"{err}; the grasp was kept in {spare}") from None
+
+
 def run(args: argparse.Namespace) -> int:
+    from models.objects import parse_instruction
+
+    check_object_arguments("plan", args)
+    parse_instruction(args.text)
+    check_hand_name(args.hand)
+    out = output_file(args.out, GRASP_SUFFIXES, "--out grasp file") if args.out else None
+
+    from planner.api import check_settings
+    from planner.functional import FunctionalPlanner, PlannerSettings
+    from planner.objectref import object_ref
+
+    settings = check_settings(PlannerSettings(max_candidates=args.candidates, protocol=args.preset))
     obj = object_from_args(args)
-    settings = PlannerSettings(max_candidates=args.candidates, protocol=args.preset)
+    if not obj.labelled:
+        raise DrograspError(
+            "the object has no part labels, so the planner cannot find the instructed part; "
+            "give --part-labels FILE (`drograsp objects label MESH OUT.json` writes one) or a "
+            "library object (--object)"
+        )
+    print(
+        f"planning {args.text!r} with {args.hand}: up to {args.candidates} candidates solved "
+        "(Drake) and validated (MuJoCo)...",
+        file=sys.stderr,
+        flush=True,
+    )
     result = FunctionalPlanner(args.hand, settings).plan(obj, args.text)
     if args.json:
         print(json.dumps(result.summary(), indent=2))
@@ -83,9 +161,13 @@ def run(args: argparse.Namespace) -> int:
             + (c.solve.message or ("slipped in validation" if c.order is not None else "not tried"))
             for c in result.candidates
         )
-        raise DrograspError(f"no grasp found for {args.text!r} with {args.hand} ({tried})")
-    if args.out:
+        print(
+            f"drograsp plan: no grasp found for {args.text!r} with {args.hand} ({tried})",
+            file=sys.stderr,
+        )
+        return 1
+    if out is not None:
         result.grasp.metrics["object"] = object_ref(obj)
-        result.grasp.save(Path(args.out))
-        print(f"wrote {args.out}")
+        save_result(result.grasp, out)
+        print(f"wrote {out}")
     return 0 if result.success else 1

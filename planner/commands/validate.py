@@ -3,6 +3,8 @@
 Reads an NPZ like ../shared/reference/dexgraspbench/grasps.npz (object, scale, obj_pose and
 {pregrasp,grasp,squeeze}_qpos rows: 7 root values then the hand XML's joints), prints the success
 rate and mean displacement, and the agreement with `reference_success` when the file has it.
+`--out` writes the per-grasp results as JSON (checked before the work). Exit code 0: at least
+one grasp holds; 1: none holds; 2: bad input.
 """
 
 from __future__ import annotations
@@ -13,13 +15,9 @@ import time
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from models.errors import DrograspError
-from planner.validation.batch import validate_many
-from planner.validation.hands import HandAdapter, mjcf_hand, mjcf_joint_names, project_hand
-from planner.validation.layout import read_rows, row_case
-from planner.validation.protocol import PRESETS, get_protocol
+from models.paths import input_file, input_folder, output_file, write_text_atomic
+from planner.commands.args import PRESET_NAMES, positive_int
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -35,7 +33,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     hand.add_argument("--hand", help="built-in hand name (rows follow its joint order)")
     p.add_argument("--joint-map", type=Path, help="JSON {grasp joint: XML joint} for --hand-xml")
     p.add_argument("--objects", type=Path, required=True, help="folder of <object>/convex_pieces")
-    p.add_argument("--preset", default="dexgraspbench", choices=sorted(PRESETS))
+    p.add_argument("--preset", default="dexgraspbench", choices=PRESET_NAMES)
     p.add_argument(
         "--set",
         action="append",
@@ -44,10 +42,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="override a protocol setting, e.g. --set hold_time=3 (repeatable)",
     )
     p.add_argument("--all-directions", action="store_true", help="test all six directions")
-    p.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
-    p.add_argument("--limit", type=int, default=None, help="validate only the first N grasps")
+    p.add_argument(
+        "--workers", type=positive_int, default=None, help="processes (default: all cores)"
+    )
+    p.add_argument(
+        "--limit", type=positive_int, default=None, help="validate only the first N grasps"
+    )
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
-    p.add_argument("--out", type=Path, help="write per-grasp results to this JSON file")
+    p.add_argument("--out", type=Path, help="write per-grasp results to this JSON file (.json)")
     p.set_defaults(func=run)
 
 
@@ -67,17 +69,41 @@ def parse_overrides(items: list[str]) -> dict[str, Any]:
     return out
 
 
-def _hand(args: argparse.Namespace) -> tuple[HandAdapter, tuple[str, ...], dict[str, str]]:
+def _joint_map(path: Path | None) -> dict[str, str]:
+    if path is None:
+        return {}
+    path = input_file(path, "joint map")
+    try:
+        data = json.loads(path.read_bytes().decode("utf-8"))
+    except ValueError as err:
+        raise DrograspError(f"joint map {path} is not JSON: {err}") from None
+    if not isinstance(data, dict) or not all(
+        isinstance(k, str) and isinstance(v, str) for k, v in data.items()
+    ):
+        raise DrograspError(
+            f"joint map {path}: expected a JSON object of names, {{grasp joint: XML joint}}"
+        )
+    return data
+
+
+def _hand(args: argparse.Namespace) -> tuple[Any, tuple[str, ...], dict[str, str]]:
+    from planner.validation.hands import mjcf_hand, mjcf_joint_names, project_hand
+
     if args.hand:
         adapter = project_hand(args.hand)
         return adapter, adapter.joint_names, {}
-    joint_map = json.loads(args.joint_map.read_text()) if args.joint_map else {}
-    xml_joints = mjcf_joint_names(str(args.hand_xml.resolve())) if args.hand_xml.is_file() else ()
-    adapter = mjcf_hand(args.hand_xml, joint_map)
+    if args.joint_map and not args.hand_xml:
+        raise DrograspError("--joint-map maps the joints of --hand-xml; give the hand file too")
+    joint_map = _joint_map(args.joint_map)
+    xml = input_file(args.hand_xml, "MJCF hand file (--hand-xml)")
+    xml_joints = mjcf_joint_names(str(xml.resolve()))
+    adapter = mjcf_hand(xml, joint_map)
     return adapter, xml_joints, joint_map
 
 
-def _summary(rows: dict[str, np.ndarray], results: list, wall: float, preset: str) -> dict:
+def _summary(rows: dict[str, Any], results: list, wall: float, preset: str) -> dict:
+    import numpy as np
+
     ok = np.array([r.success for r in results], dtype=bool)
     tested = [r for r in results if r.directions]
     summary: dict[str, Any] = {
@@ -106,7 +132,15 @@ def _summary(rows: dict[str, np.ndarray], results: list, wall: float, preset: st
 
 
 def run(args: argparse.Namespace) -> int:
+    from planner.validation.protocol import get_protocol
+
     protocol = get_protocol(args.preset, **parse_overrides(args.set))
+    out = output_file(args.out, (".json",), "--out results file") if args.out else None
+    input_folder(args.objects, "objects folder (--objects)")
+
+    from planner.validation.batch import validate_many
+    from planner.validation.layout import read_rows, row_case
+
     rows = read_rows(args.file, args.limit)
     adapter, xml_joints, joint_map = _hand(args)
     n = len(rows["grasp_qpos"])
@@ -126,14 +160,15 @@ def run(args: argparse.Namespace) -> int:
         progress=True,
     )
     summary = _summary(rows, results, time.perf_counter() - start, args.preset)
-    if args.out:
+    if out is not None:
         per_grasp = []
         for i, r in enumerate(results):
             entry = {"index": i, "object": str(rows["object"][i]), "scale": float(rows["scale"][i])}
             if "reference_success" in rows:
                 entry["reference_success"] = bool(rows["reference_success"][i])
             per_grasp.append(entry | r.to_dict())
-        args.out.write_text(json.dumps({"summary": summary, "grasps": per_grasp}, indent=1))
+        text = json.dumps({"summary": summary, "grasps": per_grasp}, indent=1)
+        write_text_atomic(out, text, "--out results file")
     if args.json:
         print(json.dumps(summary, indent=1))
     else:
@@ -156,4 +191,4 @@ def run(args: argparse.Namespace) -> int:
                 f"{summary['reference_success_rate']:.1%}; {summary['false_success']} false "
                 f"successes, {summary['false_failure']} false failures)"
             )
-    return 0
+    return 0 if summary["successes"] else 1

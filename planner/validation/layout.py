@@ -21,17 +21,35 @@ LAYOUT_KEYS = ("object", "scale", "pregrasp_qpos", "grasp_qpos", "squeeze_qpos")
 
 def read_rows(path: Path, limit: int | None = None) -> dict[str, np.ndarray]:
     """The arrays of a grasps NPZ (first `limit` rows), checked for the layout's keys."""
-    path = Path(path)
-    if not path.is_file():
+    import zipfile
+
+    from models.paths import input_file
+
+    if not Path(path).expanduser().exists():
         raise GraspError(f"{path}: no such grasps file")
+    path = input_file(path, "grasps file", GraspError)
     try:
         with np.load(path, allow_pickle=False) as npz:
             rows = {k: npz[k] for k in npz.files}
-    except ValueError as err:
-        raise GraspError(f"{path}: not a readable NPZ without pickle ({err})") from None
+    except (ValueError, OSError, EOFError, KeyError, zipfile.BadZipFile) as err:
+        raise GraspError(
+            f"{path}: not a readable NPZ without pickle ({type(err).__name__}: {err}); is the "
+            "file complete?"
+        ) from None
     missing = [k for k in LAYOUT_KEYS if k not in rows]
     if missing:
         raise GraspError(f"{path}: missing arrays {missing} of DexGraspBench's layout")
+    if rows["scale"].dtype.kind not in "iuf":
+        raise GraspError(f"{path}: scale must hold numbers, got {rows['scale'].dtype}")
+    for key in ("pregrasp_qpos", "grasp_qpos", "squeeze_qpos"):
+        if rows[key].ndim != 2 or rows[key].dtype.kind not in "iuf":
+            raise GraspError(
+                f"{path}: {key} must be a 2-D array of numbers, got {rows[key].dtype} {rows[key].shape}"
+            )
+    count = len(rows["grasp_qpos"])
+    for key, arr in rows.items():
+        if key in LAYOUT_KEYS and (arr.ndim == 0 or len(arr) != count):
+            raise GraspError(f"{path}: {key} has {arr.shape} rows, grasp_qpos {count}")
     n = len(rows["grasp_qpos"]) if limit is None else min(limit, len(rows["grasp_qpos"]))
     return {k: v[:n] if v.ndim and len(v) >= n else v for k, v in rows.items()}
 
