@@ -2,17 +2,22 @@
 and squeeze, and the anchors.
 
 `show_live` serves the scene on localhost with a phase slider; `write_html` writes a
-self-contained page (Meshcat's StaticHtml) in which the three phases play as an animation.
+self-contained page (Meshcat's StaticHtml) in which the three phases play as an animation, with
+a caption (hand, instruction, verdict, part, phases). Meshcat always runs a web server: it is
+bound to localhost only, never to every interface, and the pages of one process share one
+server, which announces nothing (it serves no one; Drake's "Meshcat listening" line is muted).
 """
 
 from __future__ import annotations
 
+import html
+import logging
 import time
 from pathlib import Path
 
 import numpy as np
 import torch
-from pydrake.geometry import Box, Capsule, Meshcat, MeshcatAnimation, Rgba, Sphere
+from pydrake.geometry import Box, Capsule, Meshcat, MeshcatAnimation, MeshcatParams, Rgba, Sphere
 from pydrake.math import RigidTransform, RotationMatrix
 
 from models.grasp import Grasp
@@ -30,6 +35,50 @@ PART_COLOURS = [
 HAND_RGBA = Rgba(0.25, 0.25, 0.28, 0.85)
 ANCHOR_RGBA = Rgba(0.95, 0.1, 0.1, 1.0)
 PHASES = ("pregrasp", "grasp", "squeeze")
+
+
+def new_meshcat() -> Meshcat:
+    """A Meshcat bound to localhost (Drake's default listens on every interface), without
+    Drake's "Meshcat listening" line: callers that serve say where themselves."""
+    log = logging.getLogger("drake")
+    level = log.level
+    log.setLevel(logging.WARNING)
+    try:
+        return Meshcat(MeshcatParams(host="localhost"))
+    finally:
+        log.setLevel(level)
+
+
+_PAGES: list[Meshcat] = []  # the one Meshcat that builds this process's pages
+
+
+def _page_meshcat() -> Meshcat:
+    if not _PAGES:
+        _PAGES.append(new_meshcat())
+    return _PAGES[0]
+
+
+def caption(grasp: Grasp) -> str:
+    """What a page shows in text: hand, instruction, verdict, part and the phases."""
+    m = grasp.metrics
+    verdict = {True: "holds", False: "does not hold"}.get(m.get("success"), "not validated")
+    parts = [grasp.hand, grasp.instruction or "", verdict]
+    if m.get("part"):
+        parts.append(f"part touched: {m['part']}")
+    if m.get("squeeze_depth") is not None:
+        parts.append(f"squeeze depth {m['squeeze_depth']:g}")
+    return " · ".join(p for p in parts if p)
+
+
+def _with_caption(page: str, text: str) -> str:
+    box = (
+        '<div style="position:fixed;left:8px;bottom:8px;z-index:10;padding:6px 10px;'
+        'background:rgba(255,255,255,0.85);font:14px sans-serif;border-radius:4px">'
+        f"<b>{html.escape(text)}</b><br>phases: pregrasp &rarr; grasp &rarr; squeeze (open "
+        "Animations and press play; the red dots are the anchors)</div>"
+    )
+    head, sep, rest = page.partition("<body>")
+    return f"{head}{sep}\n{box}{rest}" if sep else page
 
 
 def _transform(matrix: np.ndarray) -> RigidTransform:
@@ -120,10 +169,13 @@ def _interpolated(hand: HandModel, grasp: Grasp, phase: float) -> np.ndarray:
     return hand.link_poses(torch.tensor(wrist[None], dtype=torch.float64), qt)[0].numpy()
 
 
-def write_html(grasp: Grasp, obj: ObjectModel, hand: HandModel, out: str | Path) -> Path:
+def write_html(
+    grasp: Grasp, obj: ObjectModel, hand: HandModel, out: str | Path, text: str | None = None
+) -> Path:
     """A self-contained page: the three phases play as an animation (loop it with the
-    Animations controls); it opens without a server."""
-    meshcat = Meshcat()
+    Animations controls), captioned with `text` (default: `caption(grasp)`); it opens without
+    a server."""
+    meshcat = _page_meshcat()
     build_scene(meshcat, grasp, obj, hand)
     fps = 10
     anim = MeshcatAnimation(frames_per_second=fps)
@@ -132,17 +184,17 @@ def write_html(grasp: Grasp, obj: ObjectModel, hand: HandModel, out: str | Path)
         for link, pose in zip(hand.link_names, _interpolated(hand, grasp, phase), strict=True):
             anim.SetTransform(frame, f"/hand/{link}", _transform(pose))
     meshcat.SetAnimation(anim)
-    out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(meshcat.StaticHtml())
-    return out
+    page = _with_caption(meshcat.StaticHtml(), caption(grasp) if text is None else text)
+    from models.paths import output_file, write_text_atomic
+
+    return write_text_atomic(output_file(out, (".html", ".htm"), "page"), page, "page")
 
 
 def show_live(
     grasp: Grasp, obj: ObjectModel, hand: HandModel, seconds: float | None = None
 ) -> None:
     """Serve the scene on localhost with a phase slider until Ctrl+C (or `seconds`)."""
-    meshcat = Meshcat()
+    meshcat = new_meshcat()
     build_scene(meshcat, grasp, obj, hand)
     slider = "phase: 0 pregrasp, 1 grasp, 2 squeeze"
     meshcat.AddSlider(slider, 0.0, 2.0, 0.05, 1.0)
