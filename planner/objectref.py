@@ -75,6 +75,11 @@ def resolve_object(ref: Any) -> ObjectModel:
             seed = int(seed)  # JSON numbers written by other tools
         obj = make_object(ref["category"], seed)
     elif "path" in ref:
+        if not isinstance(ref["path"], str) or not isinstance(ref.get("part_labels", ""), str):
+            raise ObjectError(
+                f"the object reference's path and part_labels must be a path (a file name), "
+                f"got {ref['path']!r}"
+            )
         scale = ref.get("scale", 1.0)
         obj = load_labelled(ref["path"], ref.get("part_labels"), scale=scale)
     elif "cloud" in ref:
