@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -198,3 +200,35 @@ def test_dexgraspbench_layout_errors():
     for bad, match in ((skew, "not a rigid transform"), (np.zeros(6), "4x4 transform or 7")):
         with pytest.raises(GraspError, match=match):
             to_dexgraspbench(make_grasp(), root_offset=bad, xml_joint_names=NAMES)
+
+
+def test_damaged_files_are_named_and_saving_makes_folders(tmp_path):
+    """A truncated NPZ raised BadZipFile, an empty file EOFError, invalid UTF-8
+    UnicodeDecodeError, and saving into a missing folder FileNotFoundError."""
+    grasp = make_grasp(metrics={"epsilon": np.float64(0.2), "votes": np.array([1, 2])})
+    npz = grasp.save(tmp_path / "new" / "deeper" / "g.npz")  # folders made, numpy metrics kept
+    assert Grasp.load(npz).metrics == {"epsilon": 0.2, "votes": [1, 2]}
+    data = npz.read_bytes()
+    (tmp_path / "cut.npz").write_bytes(data[: len(data) // 2])
+    (tmp_path / "empty.json").write_bytes(b"")
+    (tmp_path / "latin.json").write_bytes(b'{"hand": "\xff"}')
+    (tmp_path / "names.json").write_text(
+        json.dumps(json.loads(grasp.to_json()) | {"joint_names": 5})
+    )
+    for name, message in (
+        ("cut.npz", "cut.npz: unreadable grasp NPZ .*is the file complete"),
+        ("empty.json", "empty.json is empty"),
+        ("latin.json", "latin.json is not UTF-8"),
+        ("names.json", "names.json: joint_names: expected a list"),
+    ):
+        with pytest.raises(GraspError, match=message):
+            Grasp.load(tmp_path / name)
+    blocker = tmp_path / "a_file"
+    blocker.write_text("x")
+    with pytest.raises(GraspError, match="in the way"):
+        grasp.save(blocker / "g.json")
+    with pytest.raises(GraspError, match="cannot be saved"):
+        make_grasp(metrics={"thing": object()}).save(tmp_path / "m.json")
+    assert not list(tmp_path.glob(".*.tmp*"))  # no half-written file left behind
+    with pytest.raises(GraspError, match="expected numbers, got booleans"):
+        make_grasp(grasp=[True, False, True, False])

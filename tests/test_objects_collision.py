@@ -1,13 +1,19 @@
-"""Collision pieces: cloud pieces keep cavities open; CoACD is cached; real scans all work."""
+"""Collision pieces: cloud pieces keep cavities open; CoACD is cached and runs where its abort or
+hang is a clear error; open meshes get surface pieces; real scans all work."""
 
 from __future__ import annotations
 
+import time
+import warnings
 from pathlib import Path
 
 import numpy as np
 import pytest
+import trimesh
 
+from models.errors import ObjectError
 from models.objects import cache_dir, coacd_pieces, contains, load_object, make_object
+from models.objects.model import OpenMeshWarning
 
 REFERENCE = Path(__file__).resolve().parents[1].parent / "shared" / "reference"
 
@@ -103,8 +109,60 @@ def test_reference_meshes_load_fast():
     assert pieces
 
 
+def test_coacd_abort_is_an_error_not_the_end_of_the_process(tmp_path, monkeypatch):
+    """CoACD aborts the process on a flat mesh (std::logic_error, exit 134); it runs in a
+    subprocess, so this process gets an ObjectError saying so."""
+    monkeypatch.setenv("DROGRASP_CACHE", str(tmp_path))
+    box = trimesh.creation.box(extents=[0.05, 0.05, 0.05])
+    flat = trimesh.Trimesh(box.vertices * [1, 1, 0], box.faces, process=False)
+    with pytest.raises(ObjectError, match="CoACD failed on flat: it was killed by signal 6"):
+        coacd_pieces(flat, name="flat")
+
+
+def test_coacd_time_limit_is_an_error(tmp_path, monkeypatch):
+    """CoACD never finishes on an open box (still running after 590 s on a scan); past its
+    time limit the subprocess is killed and the error says what to do."""
+    monkeypatch.setenv("DROGRASP_CACHE", str(tmp_path))
+    box = trimesh.creation.box(extents=[0.05, 0.05, 0.05])
+    open_box = trimesh.Trimesh(box.vertices, box.faces[:-2], process=False)
+    start = time.monotonic()
+    with pytest.raises(ObjectError, match="did not finish .* in 3 s.*surface pieces"):
+        coacd_pieces(open_box, name="open box", timeout=3)
+    assert time.monotonic() - start < 30
+    monkeypatch.setenv("DROGRASP_COACD_TIMEOUT", "soon")
+    with pytest.raises(ObjectError, match="DROGRASP_COACD_TIMEOUT"):
+        coacd_pieces(open_box)
+
+
+def test_open_mesh_gets_surface_pieces_with_a_warning():
+    """An open mesh (a scan that misses a side) is decomposed in about a second instead of
+    CoACD's never; the pieces cover the surface and keep the tube's inside open."""
+    tube = trimesh.creation.annulus(r_min=0.028, r_max=0.03, height=0.1, sections=48)
+    side = np.linalg.norm(tube.triangles_center[:, :2], axis=1) > 0.029
+    tube.update_faces(side & (np.abs(tube.face_normals[:, 2]) < 0.5))  # outer wall only
+    tube.remove_unreferenced_vertices()
+    from models.objects.loading import from_mesh
+
+    obj = from_mesh(tube, "tube")
+    assert not obj.mesh.is_watertight
+    start = time.monotonic()
+    with pytest.warns(OpenMeshWarning, match="open"):
+        pieces = obj.collision_pieces()
+    assert time.monotonic() - start < 20 and pieces
+    lo = np.min([p.bounds[0] for p in pieces], axis=0)
+    hi = np.max([p.bounds[1] for p in pieces], axis=0)
+    np.testing.assert_allclose(lo, obj.mesh.bounds[0], atol=0.006)
+    np.testing.assert_allclose(hi, obj.mesh.bounds[1], atol=0.006)
+    assert not contains(pieces, [0.0, 0.0, 0.0])  # the tube's axis stays free
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert obj.collision_pieces("surface") is pieces  # asked for: no warning, cached
+    with pytest.raises(ObjectError, match="pieces must be one of"):
+        obj.pieces = "magic"
+
+
 @pytest.mark.slow
-@pytest.mark.coacd  # 2-3 minutes of CoACD per real scan on this CPU: too long for CI
+@pytest.mark.coacd  # 2-3 minutes of CoACD per watertight scan on this CPU: too long for CI
 @pytest.mark.parametrize("index", range(15))
 def test_reference_mesh_gets_coacd_pieces(index):
     meshes = _reference_meshes()
@@ -113,7 +171,11 @@ def test_reference_mesh_gets_coacd_pieces(index):
     if index >= len(meshes):
         pytest.skip(f"only {len(meshes)} reference meshes")
     obj = load_object(meshes[index])
-    pieces = obj.collision_pieces()  # CoACD, cached in ~/.cache/drograsp (or $DROGRASP_CACHE)
+    # CoACD for a watertight scan (cached in ~/.cache/drograsp or $DROGRASP_CACHE), surface
+    # pieces for an open one
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", OpenMeshWarning)
+        pieces = obj.collision_pieces()
     assert pieces and all(p.volume > 0 and p.is_watertight for p in pieces)
     lo = np.min([p.bounds[0] for p in pieces], axis=0)
     hi = np.max([p.bounds[1] for p in pieces], axis=0)

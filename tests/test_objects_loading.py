@@ -196,3 +196,107 @@ def test_bad_shape_and_bad_labels():
         load_object(np.zeros((100, 2)))
     with pytest.raises(ObjectError, match="labels need part_names"):
         load_object(_ball(), labels=np.zeros(2000, dtype=int))
+
+
+def _with_degenerate_faces(tmp_path):
+    """A labelled mug written with two zero-area faces inserted at known places: the loader
+    drops them, so its faces and the file's differ by two."""
+    mug = make_object("mug", 3)
+    faces = np.asarray(mug.mesh.faces)
+    labels = np.asarray(mug.face_labels)
+    bad = np.array([[0, 0, 1], [5, 5, 5]])
+    file_faces = np.vstack([faces[:10], bad[:1], faces[10:500], bad[1:], faces[500:]])
+    file_labels = np.concatenate([labels[:10], [1], labels[10:500], [1], labels[500:]])
+    path = tmp_path / "scan.obj"
+    trimesh.Trimesh(mug.mesh.vertices, file_faces, process=False).export(path)
+    return path, mug, file_labels
+
+
+def test_labels_in_the_files_or_the_loaders_face_order_both_apply(tmp_path):
+    """Labels made for the file's faces were refused ("16384 faces but the mesh has 16378")
+    because the loader drops degenerate faces; both orders work now, and `drograsp objects
+    label` writes the loader's, with face centres that match the labels by geometry."""
+    import json
+
+    from planner.cli import main
+    from planner.objectref import load_labelled
+
+    path, mug, file_labels = _with_degenerate_faces(tmp_path)
+    names = list(mug.part_names)
+    by_file = tmp_path / "by_file.json"
+    by_file.write_text(json.dumps({"part_names": names, "face_labels": file_labels.tolist()}))
+    obj = load_labelled(path, by_file)
+    assert len(obj.mesh.faces) == len(file_labels) - 2 and obj.source_face_count == len(file_labels)
+    np.testing.assert_array_equal(obj.face_labels, mug.face_labels)
+    by_loader = tmp_path / "by_loader.json"
+    by_loader.write_text(json.dumps({"part_names": names, "face_labels": mug.face_labels.tolist()}))
+    np.testing.assert_array_equal(load_labelled(path, by_loader).face_labels, mug.face_labels)
+    wrong = tmp_path / "wrong.json"
+    wrong.write_text(json.dumps({"part_names": names, "face_labels": [0] * 7}))
+    with pytest.raises(ObjectError, match=r"labels 7 faces but .* objects label"):
+        load_labelled(path, wrong)
+    # drograsp objects label: the loader's order with face centres, converted from the file's
+    out = tmp_path / "labels.json"
+    assert main(["objects", "label", str(path), str(out), "--labels", str(by_file)]) == 0
+    data = json.loads(out.read_text())
+    assert data["faces"] == len(mug.mesh.faces) and data["faces_in_file"] == len(file_labels)
+    assert data["face_labels"] == mug.face_labels.tolist()
+    # matched by face geometry: shuffled faces still get their labels
+    order = np.random.default_rng(0).permutation(data["faces"])
+    data["face_labels"] = np.asarray(data["face_labels"])[order].tolist()
+    data["face_centres"] = np.asarray(data["face_centres"])[order].tolist()
+    shuffled = tmp_path / "shuffled.json"
+    shuffled.write_text(json.dumps(data))
+    np.testing.assert_array_equal(load_labelled(path, shuffled).face_labels, mug.face_labels)
+    other = make_object("cup", 1).mesh.triangles_center.tolist()
+    data["face_centres"], data["face_labels"] = other, [0] * len(other)
+    shuffled.write_text(json.dumps(data))
+    with pytest.raises(ObjectError, match="do not match this mesh"):
+        load_labelled(path, shuffled)
+    # without --labels: every face part 0 of --parts, a file to edit
+    assert main(["objects", "label", str(path), str(out), "--parts", "body", "handle"]) == 0
+    fresh = json.loads(out.read_text())
+    assert fresh["part_names"] == ["body", "handle"] and set(fresh["face_labels"]) == {0}
+
+
+@pytest.mark.parametrize(
+    ("value", "message"),
+    [
+        ([[0.0, 0.0, 0.0], [1.0, 2.0]], "not a rectangular array"),
+        (np.array([["a", "b", "c"]] * 100), "holds text"),
+        ({"points": [1, 2, 3]}, "cannot use dict"),
+        (np.zeros(100, dtype=[("x", "f4"), ("y", "f4"), ("z", "f4")]), "structured array"),
+        (np.ones((100, 3), dtype=complex), "complex numbers"),
+    ],
+)
+def test_arrays_that_are_no_cloud_are_refused(value, message):
+    with pytest.raises(ObjectError, match=message):
+        load_object(value)
+
+
+def test_loading_arguments_are_checked(tmp_path):
+    import torch
+
+    pts = _ball(500)
+    cloud = torch.tensor(pts, requires_grad=True)  # a tensor with grad loads as its values
+    np.testing.assert_allclose(load_object(cloud).cloud, pts)
+    with pytest.raises(ObjectError, match="negative scale would mirror"):
+        load_object(pts, scale=-1)
+    with pytest.raises(ObjectError, match="one part per letter"):
+        load_object(pts, labels=np.zeros(500, int), part_names="body")
+    with pytest.raises(ObjectError, match="whole numbers"):
+        load_object(pts, labels=np.full(500, 0.5), part_names=["a"])
+    with pytest.raises(ObjectError, match="longer than 255 bytes"):
+        load_object(tmp_path / ("x" * 300 + ".obj"))
+    with pytest.raises(ObjectError, match="no user of that name"):
+        load_object("~nosuchuser_drograsp/mesh.obj")
+    ply = tmp_path / "bad.ply"
+    ply.write_text(
+        "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\n"
+        "property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n"
+        "0 0 0\n0.05 0 0\n0 0.05 0\n0 0 0.05\n3 0 1 40\n"
+    )
+    with pytest.raises(ObjectError, match="damaged: a face refers to vertex 41"):
+        load_object(ply)
+    with pytest.raises(ObjectError, match="seed must be a non-negative integer"):
+        make_object("mug", 1.5)

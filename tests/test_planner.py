@@ -12,7 +12,7 @@ import time
 import numpy as np
 import pytest
 
-from models.errors import InstructionError, PlanningError
+from models.errors import DrograspError, InstructionError, PlanningError
 from models.grasp import Grasp
 from models.objects import load_object, make_object
 from planner import plan_grasp
@@ -446,3 +446,28 @@ def test_a_planned_pinch_leaves_its_free_finger_out_of_the_anchor_error(hand_nam
     for c in solved:
         assert np.isfinite(c.solve.anchor_error)
         assert c.solve.anchor_error < 0.03
+
+
+def test_plan_grasp_refuses_bad_settings_before_planning():
+    """A zero approach step divided by zero, a tiny one asked for terabytes and solve_batch=0
+    never ended: `from planner import plan_grasp` checks its settings first."""
+    from planner import plan_grasp as checked
+    from planner.api import SettingsError
+
+    bottle = make_object("bottle", 1)
+    for kwargs, message in (
+        ({"approach_step_deg": 0}, "approach_step_deg must be between 1 and 360"),
+        ({"approach_step_deg": 1e-9}, "between 1 and 360"),
+        ({"solve_batch": 0}, "solve_batch must be at least 1"),
+        ({"max_candidates": 1.5}, "max_candidates must be a whole number"),
+        ({"span_factor": float("nan")}, "span_factor must be finite"),
+        ({"use_palm": "no"}, "use_palm must be True or False"),
+    ):
+        with pytest.raises(SettingsError, match=message):
+            checked(bottle, "Hold a bottle by body", "allegro", PlannerSettings(**kwargs))
+    with pytest.raises(DrograspError, match="unknown protocol preset"):
+        checked(bottle, "Hold a bottle by body", "allegro", PlannerSettings(protocol="nosuch"))
+    with pytest.raises(DrograspError, match="hand must be"):
+        checked(bottle, "Hold a bottle by body", 5)
+    result = checked(bottle, "Hold a bottle by body", "allegro")
+    assert result.grasp.metrics["object"] == {"category": "bottle", "seed": 1}
