@@ -1,0 +1,37 @@
+"""Issue 28's rule, fuzzed: every input a user can give is a clean DrograspError or a correct
+result; never another exception, a hang, a crash of the process, or bad input accepted.
+
+The cases (tests/fuzz_cases.py, seeded) cover load_object's arrays and files, make_object,
+instructions, grasp records, validation settings, plan_grasp's settings, jobs and batch folders,
+and the CLI (in process: an exception escaping `main` is a traceback), each crash kind of the
+issue among them. They run in a worker subprocess with a time limit per case, so an abort or a
+hang is recorded, not suffered. Malformed hand folders and the hand API are reported by
+`python -m tests.fuzz_cases` but not asserted here (left for the hand models' owners).
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from tests.fuzz_cases import GROUPS, run_fuzz
+
+
+def _check(report, minimum: int) -> None:
+    figures = report.figures()
+    print(figures)
+    failures = "\n".join(f"{o.kind} [{o.group}] {o.name}: {o.detail}" for o in report.failures())
+    assert not failures, f"{figures}\n{failures}"
+    assert figures["cases"] >= minimum
+    assert set(GROUPS) == {o.group for o in report.outcomes}
+
+
+def test_fuzz_every_entry_point(tmp_path):
+    """About 450 cases in about 10-20 s."""
+    _check(run_fuzz(seed=0, scale=1, timeout=60.0, tmp=tmp_path), 400)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [1, 2])
+def test_fuzz_more_seeds(tmp_path, seed):
+    """The random families (clouds, instructions, library seeds) four times over."""
+    _check(run_fuzz(seed=seed, scale=4, timeout=120.0, tmp=tmp_path), 450)
