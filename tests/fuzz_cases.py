@@ -1048,17 +1048,17 @@ class _Worker:
             cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, cwd=REPO, env=env
         )
         first = self.read(300.0)
-        if first is None:
+        if not first:
             self.kill()
             raise RuntimeError(f"fuzz worker did not start; see {tmp / 'worker.log'}")
         self.names = [tuple(n) for n in json.loads(first)["ready"]]
 
     def read(self, timeout: float) -> str | None:
+        """The next line; None after `timeout` s without one, "" when the worker died."""
         ready, _, _ = select.select([self.proc.stdout], [], [], timeout)
         if not ready:
             return None
-        line = self.proc.stdout.readline()
-        return line or None
+        return self.proc.stdout.readline()
 
     def kill(self) -> None:
         self.proc.kill()
@@ -1087,11 +1087,17 @@ def run_fuzz(
         worker_.proc.stdin.flush()
         start = time.perf_counter()
         line = worker_.read(timeout)
-        if line is None:
-            alive = worker_.proc.poll() is None
-            kind = "hang" if alive else "crash"
+        if not line:
+            hung = line is None  # else the worker died: its pipe closed
+            if not hung:
+                try:
+                    worker_.proc.wait(timeout=10)
+                except subprocess.TimeoutExpired:
+                    pass
+            code = worker_.proc.poll()
             worker_.kill()
-            detail = f"no answer in {timeout:g} s" if alive else f"exit {worker_.proc.returncode}"
+            kind = "hang" if hung else "crash"
+            detail = f"no answer in {timeout:g} s" if hung else f"worker died, exit {code}"
             name, group = names[index]
             report.outcomes.append(Outcome(name, group, kind, detail, time.perf_counter() - start))
             worker_ = _Worker(seed, scale, tmp, groups)

@@ -115,7 +115,9 @@ def _summary(rows: dict[str, Any], results: list, wall: float, preset: str) -> d
         "pregrasp_self_penetration_failures": sum(
             r.reason == "pregrasp_self_penetration" for r in results
         ),
-        "unstable_simulations": sum(any("unstable" in w for w in r.warnings) for r in results),
+        "unstable_simulations": sum(
+            r.reason == "unstable" or any("unstable" in w for w in r.warnings) for r in results
+        ),
         "mean_translation_m": float(np.mean([r.translation for r in tested])) if tested else None,
         "mean_rotation_deg": float(np.mean([r.rotation_deg for r in tested])) if tested else None,
         "mean_wall_time_s": float(np.mean([r.wall_time for r in results])) if results else 0.0,
@@ -182,7 +184,7 @@ def run(args: argparse.Namespace) -> int:
         if summary["unstable_simulations"]:
             print(
                 f"{summary['unstable_simulations']} simulation(s) went unstable (MuJoCo reset "
-                "them); `--out` lists each grasp's warnings"
+                "them; such a grasp fails as 'unstable'); `--out` lists each grasp's warnings"
             )
         if "agreement" in summary:
             print(
