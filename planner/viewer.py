@@ -128,7 +128,16 @@ def _link_poses(hand: HandModel, grasp: Grasp, phase: str) -> np.ndarray:
 def draw_hand(meshcat: Meshcat, hand: HandModel, path: str = "/hand") -> None:
     for link in hand.link_names:
         for i, geom in enumerate(hand.tree.geoms[link]):
-            meshcat.SetObject(f"{path}/{link}/{i}", _shape(geom), HAND_RGBA)
+            if geom.kind == "mesh":  # a convex mesh (vendor hull): drawn as its hull
+                from scipy.spatial import ConvexHull
+
+                verts = np.asarray(geom.vertices, dtype=float)
+                faces = ConvexHull(verts).simplices
+                meshcat.SetTriangleMesh(
+                    f"{path}/{link}/{i}", verts.T, faces.T.astype(np.int32), HAND_RGBA
+                )
+            else:
+                meshcat.SetObject(f"{path}/{link}/{i}", _shape(geom), HAND_RGBA)
             meshcat.SetTransform(f"{path}/{link}/{i}", _transform(geom.pose))
 
 
