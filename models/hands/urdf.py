@@ -103,37 +103,89 @@ class KinematicTree:
         return pairs
 
 
-def _origin(elem: ET.Element | None) -> np.ndarray:
+def _numbers(text: str | None, n: int, what: str, path: Path, *, positive=False) -> list[float]:
+    """`n` finite numbers (> 0 where `positive`) from an attribute's text, else HandError."""
+    try:
+        values = [float(v) for v in (text or "").split()]
+    except ValueError:
+        values = []
+    if len(values) != n or not all(np.isfinite(values)) or (positive and min(values) <= 0):
+        kind = "positive numbers" if positive else "finite numbers"
+        count = "one" if n == 1 else str(n)
+        raise HandError(
+            f"{path}: {what} must be {count} {kind[:-1] if n == 1 else kind}, got {text!r}"
+        )
+    return values
+
+
+def _origin(elem: ET.Element | None, path: Path, where: str) -> np.ndarray:
     pose = np.eye(4)
     if elem is None:
         return pose
-    xyz = [float(v) for v in elem.get("xyz", "0 0 0").split()]
-    rpy = [float(v) for v in elem.get("rpy", "0 0 0").split()]
+    xyz = _numbers(elem.get("xyz", "0 0 0"), 3, f"{where} <origin xyz>", path)
+    rpy = _numbers(elem.get("rpy", "0 0 0"), 3, f"{where} <origin rpy>", path)
     pose[:3, :3] = Rotation.from_euler("xyz", rpy).as_matrix()
     pose[:3, 3] = xyz
     return pose
 
 
-def _geom(elem: ET.Element, path: Path) -> Geom:
-    pose = _origin(elem.find("origin"))
+def _geom(elem: ET.Element, path: Path, link: str) -> Geom:
+    where = f"link {link}'s <collision>"
+    pose = _origin(elem.find("origin"), path, where)
     shape = elem.find("geometry")
     child = None if shape is None else next(iter(shape), None)
     if child is None:
-        raise HandError(f"{path}: a <collision> has no geometry")
+        raise HandError(f"{path}: {where} has no geometry")
+    name = elem.get("name", "")
     if child.tag == "box":
-        size = tuple(float(v) / 2 for v in child.get("size", "").split())
-        return Geom("box", pose, size, elem.get("name", ""))
+        size = _numbers(child.get("size"), 3, f"{where} <box size>", path, positive=True)
+        return Geom("box", pose, tuple(v / 2 for v in size), name)
     if child.tag == "sphere":
-        return Geom("sphere", pose, (float(child.get("radius")),), elem.get("name", ""))
+        (r,) = _numbers(child.get("radius"), 1, f"{where} <sphere radius>", path, positive=True)
+        return Geom("sphere", pose, (r,), name)
     if child.tag in ("capsule", "cylinder"):
-        r, length = float(child.get("radius")), float(child.get("length"))
-        return Geom("capsule", pose, (r, length / 2), elem.get("name", ""))
+        what = f"{where} <{child.tag}"
+        (r,) = _numbers(child.get("radius"), 1, f"{what} radius>", path, positive=True)
+        (length,) = _numbers(child.get("length"), 1, f"{what} length>", path, positive=True)
+        return Geom("capsule", pose, (r, length / 2), name)
     if child.tag == "mesh":
-        return _mesh_geom(child, pose, elem.get("name", ""), path)
+        return _mesh_geom(child, pose, name, path)
     raise HandError(
         f"{path}: collision geometry <{child.tag}> is not supported; use box, sphere, capsule "
         "or mesh (collided as its convex hull)"
     )
+
+
+def _check_visual(elem: ET.Element, path: Path, link: str) -> None:
+    """A <visual>: the project draws nothing from it, but Drake and MuJoCo parse it (and Drake
+    aborts on a box of negative size), so its numbers are checked as a collision's are."""
+    where = f"link {link}'s <visual>"
+    _origin(elem.find("origin"), path, where)
+    shape = elem.find("geometry")
+    child = None if shape is None else next(iter(shape), None)
+    if child is None:
+        raise HandError(f"{path}: {where} has no geometry")
+    what = f"{where} <{child.tag}"
+    if child.tag == "box":
+        _numbers(child.get("size"), 3, f"{what} size>", path, positive=True)
+    elif child.tag == "sphere":
+        _numbers(child.get("radius"), 1, f"{what} radius>", path, positive=True)
+    elif child.tag in ("capsule", "cylinder"):
+        _numbers(child.get("radius"), 1, f"{what} radius>", path, positive=True)
+        _numbers(child.get("length"), 1, f"{what} length>", path, positive=True)
+    elif child.tag == "mesh":
+        if not child.get("filename"):
+            raise HandError(f"{path}: {where} <mesh> has no filename")
+        scale = child.get("scale")
+        if scale is not None and len(scale.split()) != 1:
+            _numbers(scale, 3, f"{what} scale>", path, positive=True)
+        elif scale is not None:
+            _numbers(scale, 1, f"{what} scale>", path, positive=True)
+    else:
+        raise HandError(
+            f"{path}: {where} has geometry <{child.tag}>; use box, sphere, cylinder, capsule or "
+            "mesh"
+        )
 
 
 def _mesh_geom(elem: ET.Element, pose: np.ndarray, name: str, path: Path) -> Geom:
@@ -162,18 +214,107 @@ def _mesh_geom(elem: ET.Element, pose: np.ndarray, name: str, path: Path) -> Geo
     return Geom("mesh", pose, (), name, np.asarray(hull.vertices, dtype=float), file)
 
 
+def _check_inertial(link: ET.Element, path: Path) -> None:
+    """An <inertial>, where given, with a finite mass >= 0 and a finite inertia whose principal
+    moments are >= 0 (MuJoCo and Drake read it; the planner does not)."""
+    inertial = link.find("inertial")
+    if inertial is None:
+        return
+    where = f"link {link.get('name')}'s <inertial>"
+    _origin(inertial.find("origin"), path, where)
+    mass = inertial.find("mass")
+    if mass is None:
+        raise HandError(f"{path}: {where} has no <mass value=...>")
+    (value,) = _numbers(mass.get("value"), 1, f"{where} <mass value>", path)
+    if value < 0:
+        raise HandError(f"{path}: {where} has a negative mass {value:g}")
+    inertia = inertial.find("inertia")
+    if inertia is None:
+        raise HandError(f"{path}: {where} has no <inertia ixx ixy ixz iyy iyz izz>")
+    keys = ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
+    i = {k: _numbers(inertia.get(k, "0"), 1, f"{where} <inertia {k}>", path)[0] for k in keys}
+    matrix = np.array(
+        [
+            [i["ixx"], i["ixy"], i["ixz"]],
+            [i["ixy"], i["iyy"], i["iyz"]],
+            [i["ixz"], i["iyz"], i["izz"]],
+        ]
+    )
+    moments = np.linalg.eigvalsh(matrix)
+    if moments.min() < -1e-12 * max(1.0, abs(moments).max()):
+        raise HandError(
+            f"{path}: {where}'s inertia is not physical (principal moments "
+            f"{', '.join(f'{m:.3g}' for m in moments)}; they must be >= 0)"
+        )
+
+
+def _revolute(j: ET.Element, name: str, jtype: str, path: Path) -> tuple[np.ndarray, float, float]:
+    """A revolute or continuous joint's unit axis and limits (continuous: -pi..pi, the range
+    the planner searches; the simulators leave it unlimited)."""
+    axis_elem = j.find("axis")
+    if axis_elem is None or axis_elem.get("xyz") is None:
+        raise HandError(
+            f'{path}: joint {name} needs <axis xyz="x y z"/>: URDF\'s default axis (1 0 0) '
+            "is rarely a finger's; write it out if it is"
+        )
+    axis = np.array(_numbers(axis_elem.get("xyz"), 3, f"joint {name} <axis xyz>", path))
+    if not np.linalg.norm(axis) > 1e-9:
+        raise HandError(f"{path}: joint {name} has a zero axis; give its rotation axis")
+    if jtype == "continuous":
+        return axis, -np.pi, np.pi
+    limit = j.find("limit")
+    if limit is None or limit.get("lower") is None or limit.get("upper") is None:
+        raise HandError(
+            f'{path}: revolute joint {name} needs <limit lower="..." upper="..."> (rad); '
+            'use type="continuous" for a joint without limits'
+        )
+    for key in ("effort", "velocity"):
+        if limit.get(key) is not None:
+            (value,) = _numbers(limit.get(key), 1, f"joint {name} <limit {key}>", path)
+            if value < 0:
+                raise HandError(f"{path}: joint {name} <limit {key}> must be 0 or more")
+    (lower,) = _numbers(limit.get("lower"), 1, f"joint {name} <limit lower>", path)
+    (upper,) = _numbers(limit.get("upper"), 1, f"joint {name} <limit upper>", path)
+    if not lower < upper:
+        raise HandError(
+            f"{path}: joint {name} has limits lower {lower:g} >= upper {upper:g}; lower must be "
+            "below upper"
+        )
+    return axis, lower, upper
+
+
 def read_urdf(path: Path) -> KinematicTree:
-    """Parse a hand URDF: revolute (or continuous) joints and fixed joints, anywhere in the tree."""
+    """Parse a hand URDF: revolute (or continuous) joints and fixed joints, anywhere in the
+    tree. Every attribute the project or the simulators read is checked: HandError names the
+    file, the element and what it must be."""
     try:
         root_elem = ET.parse(path).getroot()
     except (OSError, ET.ParseError) as err:
         raise HandError(f"cannot read URDF {path}: {err}") from err
+    if root_elem.tag != "robot":
+        raise HandError(f"{path}: a URDF's root element is <robot>, not <{root_elem.tag}>")
     geoms: dict[str, list[Geom]] = {}
     for link in root_elem.findall("link"):
-        geoms[link.get("name")] = [_geom(c, path) for c in link.findall("collision")]
+        name = link.get("name")
+        if not name:
+            raise HandError(f"{path}: a <link> has no name")
+        if name in geoms:
+            raise HandError(f"{path}: two links are named {name}; link names must be unique")
+        _check_inertial(link, path)
+        for visual in link.findall("visual"):
+            _check_visual(visual, path, name)
+        geoms[name] = [_geom(c, path, name) for c in link.findall("collision")]
+    if not geoms:
+        raise HandError(f"{path}: the URDF has no <link>")
     joints: dict[str, Joint] = {}
+    names: set[str] = set()
     for j in root_elem.findall("joint"):
         name, jtype = j.get("name"), j.get("type")
+        if not name:
+            raise HandError(f"{path}: a <joint> has no name")
+        if name in names:
+            raise HandError(f"{path}: two joints are named {name}; joint names must be unique")
+        names.add(name)
         parent_elem, child_elem = j.find("parent"), j.find("child")
         if parent_elem is None or child_elem is None:
             raise HandError(f"{path}: joint {name} needs <parent link> and <child link>")
@@ -185,37 +326,51 @@ def read_urdf(path: Path) -> KinematicTree:
             raise HandError(
                 f"{path}: link {child} is the child of joints {joints[child].name} and {name}"
             )
-        if jtype == "fixed":
-            joints[child] = Joint(
-                name, parent, child, _origin(j.find("origin")), np.zeros(3), 0.0, 0.0, "fixed"
+        if j.find("mimic") is not None:
+            raise HandError(
+                f"{path}: joint {name} has a <mimic>; give joints driven together as hand.json "
+                "couplings instead"
             )
+        origin = _origin(j.find("origin"), path, f"joint {name}")
+        dynamics = j.find("dynamics")
+        for key in ("damping", "friction"):
+            if dynamics is not None and dynamics.get(key) is not None:
+                (value,) = _numbers(dynamics.get(key), 1, f"joint {name} <dynamics {key}>", path)
+                if value < 0:
+                    raise HandError(f"{path}: joint {name} <dynamics {key}> must be 0 or more")
+        if jtype == "fixed":
+            joints[child] = Joint(name, parent, child, origin, np.zeros(3), 0.0, 0.0, "fixed")
             continue
+        if jtype is None:
+            raise HandError(
+                f'{path}: joint {name} has no type; give type="revolute", "continuous" or "fixed"'
+            )
         if jtype not in ("revolute", "continuous"):
             raise HandError(
                 f"{path}: joint {name} is {jtype}; hand URDFs use revolute (or continuous) "
                 "joints for the fingers and fixed joints for rigidly attached links"
             )
-        axis_elem = j.find("axis")
-        axis = np.array(
-            [float(v) for v in (axis_elem.get("xyz") if axis_elem is not None else "1 0 0").split()]
-        )
-        if not np.linalg.norm(axis) > 0:
-            raise HandError(f"{path}: joint {name} has a zero axis")
-        limit = j.find("limit")
-        lower = float(limit.get("lower", -np.pi)) if limit is not None else -np.pi
-        upper = float(limit.get("upper", np.pi)) if limit is not None else np.pi
+        axis, lower, upper = _revolute(j, name, jtype, path)
         joints[child] = Joint(
             name=name,
             parent=parent,
             child=child,
-            origin=_origin(j.find("origin")),
+            origin=origin,
             axis=axis / np.linalg.norm(axis),
             lower=lower,
             upper=upper,
         )
     roots = [name for name in geoms if name not in joints]
     if len(roots) != 1:
-        raise HandError(f"{path}: expected one root link, found {roots}")
+        raise HandError(
+            f"{path}: expected one root link (the palm; every other link the child of one "
+            f"joint), found {len(roots)}: {roots[:10]}"
+        )
+    if not any(geoms.values()):
+        raise HandError(
+            f"{path}: the hand has no <collision> geometry; give its links boxes, capsules, "
+            "spheres or meshes"
+        )
     order, frontier = [], [roots[0]]
     children: dict[str, list[str]] = {}
     for j in joints.values():
