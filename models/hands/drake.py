@@ -162,3 +162,37 @@ def add_hand_to_plant(
                     )
                 )
     return DrakeHand(plant, instance, bodies[hand.root_link], hand.joint_names, geometry_ids)
+
+
+def drake_link_poses(hand, configs: np.ndarray) -> np.ndarray:
+    """(C, L, 4, 4) poses of `hand.link_names` in Drake, wrist at the identity, at joint
+    configurations `configs` (C, dof): the hand as parsed from its URDF. The grasp program's
+    simplified hand (merged hulls, thinned meshes, no hand-hand filter) is built too, and its
+    signed distances queried once. Raises what Drake raises; HandModel.check turns that into a
+    HandError naming the file."""
+    from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
+    from pydrake.systems.framework import DiagramBuilder
+
+    out = np.zeros((len(configs), len(hand.link_names), 4, 4))
+    wrist = np.array([0, 0, 0, 1.0, 0, 0, 0])
+    for program in (False, True):
+        builder = DiagramBuilder()
+        plant, scene_graph = AddMultibodyPlantSceneGraph(builder, 0.0)
+        handle = add_hand_to_plant(
+            hand, plant, scene_graph, filter_self_collisions=not program, merge_hull_links=program
+        )
+        plant.Finalize()
+        diagram = builder.Build()
+        context = plant.GetMyMutableContextFromRoot(diagram.CreateDefaultContext())
+        for k, q in enumerate(configs):
+            handle.set_state(plant, context, wrist, q)
+            if program:
+                query = plant.get_geometry_query_input_port().Eval(context)
+                query.ComputeSignedDistancePairwiseClosestPoints(0.001)
+                break
+            for i, link in enumerate(hand.link_names):
+                pose = plant.EvalBodyPoseInWorld(
+                    context, plant.GetBodyByName(link, handle.instance)
+                )
+                out[k, i] = pose.GetAsMatrix4()
+    return out

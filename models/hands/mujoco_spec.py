@@ -77,3 +77,26 @@ def hand_spec(hand) -> mujoco.MjSpec:
     for a, b in meta.ignore_collision_pairs:
         spec.add_exclude(bodyname1=a, bodyname2=b)
     return spec
+
+
+def mujoco_link_poses(hand, configs: np.ndarray) -> np.ndarray:
+    """(C, L, 4, 4) poses of `hand.link_names` in MuJoCo's model of the hand (compiled from
+    `hand_spec`), wrist at the identity, at joint configurations `configs` (C, dof). Raises
+    what MuJoCo raises; HandModel.check turns that into a HandError naming the file."""
+    model = hand_spec(hand).compile()
+    data = mujoco.MjData(model)
+    wrist = int(model.joint(WRIST_JOINT).qposadr[0])
+    qadr = [int(model.joint(name).qposadr[0]) for name in hand.joint_names]
+    bodies = [model.body(name).id for name in hand.link_names]
+    out = np.zeros((len(configs), len(bodies), 4, 4))
+    for k, q in enumerate(configs):
+        data.qpos[:] = model.qpos0
+        data.qpos[wrist : wrist + 7] = [0, 0, 0, 1, 0, 0, 0]
+        data.qpos[qadr] = q
+        mujoco.mj_forward(model, data)
+        if not (np.all(np.isfinite(data.qacc)) and np.all(np.isfinite(data.xpos))):
+            raise ValueError("the hand's dynamics are not finite (check masses and inertias)")
+        out[k, :, :3, :3] = data.xmat[bodies].reshape(-1, 3, 3)
+        out[k, :, :3, 3] = data.xpos[bodies]
+        out[k, :, 3, 3] = 1.0
+    return out
