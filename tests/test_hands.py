@@ -673,3 +673,196 @@ def test_bad_collision_mesh_is_named(tmp_path, filename, message):
     urdf.write_text(urdf.read_text().replace("meshes/f_distal_pst_hull.obj", filename))
     with pytest.raises(HandError, match=message):
         load_hand(folder)
+
+
+# ---- issue 28: every malformed hand a HandError naming the file, the field and the fix ----
+def test_builtin_hands_pass_the_load_check(hand_name):
+    """load_hand checks a user's hand against MuJoCo and Drake; the built-in hands skip that
+    at load (it costs a second per process), so it is run here: their surface points sample,
+    MuJoCo and Drake build them, and every link agrees in PyTorch, MuJoCo and Drake."""
+    load_hand(hand_name).check()
+
+
+def _user_hand(tmp_path, name="mine", meta_change=None, urdf_change=None):
+    folder = tmp_path / name
+    shutil.copytree(load_hand("allegro").folder, folder)
+    meta = json.loads((folder / "hand.json").read_text())
+    if meta_change is not None:
+        meta = meta_change(meta)
+    (folder / "hand.json").write_text(meta if isinstance(meta, str) else json.dumps(meta))
+    if urdf_change is not None:
+        urdf = folder / "hand.urdf"
+        urdf.write_text(urdf_change(urdf.read_text()))
+    return folder
+
+
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        (lambda m: m | {"open_pose": 5}, "open_pose must be an object"),
+        (lambda m: m | {"urdf": None}, "urdf .* must be a non-empty string, got None"),
+        (lambda m: "[1, 2]", "must be a JSON object .* it holds a list"),
+        (
+            lambda m: m | {"fingertips": [{"name": "th", "point": [0, 0, 0], "radius": 0.01}]},
+            r"fingertips\[0\] lacks link",
+        ),
+        (lambda m: m | {"anchor_fingers": "th ff mf rf"}, "anchor_fingers must name 4"),
+        (
+            lambda m: m | {"closing_direction": dict.fromkeys(m["joint_order"], "1")},
+            "closing_direction must be 1",
+        ),
+        (
+            lambda m: m | {"palm": {**m["palm"], "normal": [0, 0, 0]}},
+            "palm.normal must be a non-zero",
+        ),
+        (
+            lambda m: m | {"actuator": {"kp": float("nan")}},
+            "actuator.kp must be a positive number",
+        ),
+        (
+            lambda m: m | {"pinch_proposal": 3},
+            "unknown field in hand.json: 'pinch_proposal' .did you mean 'pinch_proposals'",
+        ),
+        (
+            lambda m: m | {"open_pose": {**m["open_pose"], "ffj0": 3.0}},
+            "open_pose is outside the joint limits .* ffj0 3",
+        ),
+    ],
+)
+def test_user_hand_json_faults_are_named(tmp_path, change, message):
+    folder = _user_hand(tmp_path, meta_change=change)
+    with pytest.raises(HandError, match=message) as err:
+        load_hand(folder)
+    assert str(folder / "hand.json") in str(err.value)
+
+
+def test_user_hand_json_not_utf8_is_named(tmp_path):
+    folder = _user_hand(tmp_path)
+    (folder / "hand.json").write_bytes(b"\xff\xfe{")
+    with pytest.raises(HandError, match="hand.json is not UTF-8 text"):
+        load_hand(folder)
+
+
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        (lambda u: u.replace('<axis xyz="0 0 1"/>', "", 1), r'needs <axis xyz="x y z"/>'),
+        (
+            lambda u: u.replace('lower="', 'lower="x', 1),
+            "<limit lower> must be one finite number, got 'x",
+        ),
+        (
+            lambda u: u.replace('lower="-0.47" upper="0.47"', 'lower="0.47" upper="-0.47"', 1),
+            "lower 0.47 >= upper -0.47",
+        ),
+        (lambda u: u.replace("<child ", "<nochild ", 1), "needs <parent link> and <child link>"),
+        (lambda u: u.replace('<axis xyz="0 0 1"', '<axis xyz="0 0 0"', 1), "zero axis"),
+        (
+            lambda u: u.replace('<mass value="', '<mass value="nan', 1),
+            "<mass value> must be one finite number",
+        ),
+        (
+            lambda u: u.replace('<box size="', '<box size="nan ', 1),
+            "<box size> must be 3 positive numbers",
+        ),
+        (
+            lambda u: u.replace("</robot>", '<link name="palm"/></robot>'),
+            "two links are named palm",
+        ),
+    ],
+)
+def test_user_urdf_faults_are_named(tmp_path, change, message):
+    folder = _user_hand(tmp_path, urdf_change=change)
+    with pytest.raises(HandError, match=message) as err:
+        load_hand(folder)
+    assert str(folder / "hand.urdf") in str(err.value)
+
+
+def test_user_hand_the_simulators_refuse_is_a_hand_error(tmp_path):
+    """Faults only MuJoCo or Drake find (zero mass of a moving link; a visual mesh that is not
+    there) are found when the hand loads, not in the middle of a validation or a plan."""
+    import re
+
+    massless = _user_hand(
+        tmp_path,
+        "massless",
+        urdf_change=lambda u: re.sub(r'<mass value="[^"]*"', '<mass value="0"', u),
+    )
+    with pytest.raises(HandError, match="hand.urdf: MuJoCo cannot build this hand: .*mass > 0"):
+        load_hand(massless)
+    visual = '<visual><geometry><mesh filename="missing.obj"/></geometry></visual><visual>'
+    unseen = _user_hand(tmp_path, "unseen", urdf_change=lambda u: u.replace("<visual>", visual, 1))
+    with pytest.raises(HandError, match="hand.urdf: Drake cannot build this hand: .*missing.obj"):
+        load_hand(unseen)
+
+
+def test_hand_check_finds_a_reader_that_disagrees_with_the_simulators(tmp_path):
+    """The load check compares every link in PyTorch, MuJoCo and Drake: a tree that differs from
+    what the simulators read from the same URDF is refused."""
+    from dataclasses import replace
+
+    hand = load_hand(_user_hand(tmp_path))
+    joints = dict(hand.tree.joints)
+    moved = joints["ff_medial"].origin.copy()
+    moved[2, 3] += 0.001
+    joints["ff_medial"] = replace(joints["ff_medial"], origin=moved)
+    wrong = type(hand)(hand.folder, hand.meta, replace(hand.tree, joints=joints))
+    with pytest.raises(HandError, match="MuJoCo puts link ff_medial elsewhere"):
+        wrong.check()
+
+
+def test_hand_api_takes_arrays_lists_and_unbatched_inputs():
+    """q as a tensor, array or list, of shape (dof,) or (B, dof); wrist (7,), (B, 7), (4, 4) or
+    (B, 4, 4); a batch of one is repeated. The answer is always batched and the same."""
+    hand = load_hand("allegro")
+    wrist, q = random_configs(hand, 3, seed=7)
+    ref = hand.fingertip_positions(torch.tensor(wrist), torch.tensor(q)).numpy()
+    matrix = np.eye(4)
+    matrix[:3, :3] = Rotation.from_quat(wrist[0, 3:], scalar_first=True).as_matrix()
+    matrix[:3, 3] = wrist[0, :3]
+    for w, j in [
+        (wrist[0], q[0]),
+        (wrist[0].tolist(), q[0].tolist()),
+        (torch.tensor(wrist[:1]), q[:1]),
+        (matrix, torch.tensor(q[0])),
+        (torch.tensor(matrix[None]), q[0]),
+    ]:
+        out = hand.fingertip_positions(w, j)
+        assert out.shape == (1, 4, 3) and out.dtype == torch.float64
+        np.testing.assert_allclose(out.numpy(), ref[:1], atol=1e-12)
+    many = hand.surface_points(wrist[0], q)  # one wrist for three joint vectors
+    np.testing.assert_allclose(
+        many[0].numpy(), hand.surface_points(wrist[0], q[0])[0].numpy(), atol=1e-12
+    )
+    assert many.shape == (3, 512, 3)
+    qt = torch.tensor(q, requires_grad=True)
+    hand.link_poses(torch.tensor(wrist), qt).sum().backward()
+    assert qt.grad is not None and torch.isfinite(qt.grad).all()
+
+
+@pytest.mark.parametrize(
+    "wrist, q, message",
+    [
+        (
+            np.zeros((1, 6)),
+            np.zeros(16),
+            r"wrist pose .* shape \(1, 6\); expected \(7,\) or \(B, 7\)",
+        ),
+        ([0, 0, 0, 0, 0, 0, 0], np.zeros(16), "zero quaternion"),
+        ([0, 0, 0, 1, 1, 1, 1], np.zeros(16), r"non-unit \(norm 2\) quaternion"),
+        (2 * np.eye(4), np.zeros(16), "not a rigid transform"),
+        ([0, 0, 0, 1, 0, 0, 0], np.zeros(16, dtype=bool), "must hold real numbers, got booleans"),
+        ([0, 0, 0, 1, 0, 0, 0], [[0.0] * 16, [0.0] * 3], "list of equal-length rows"),
+        ([0, 0, 0, 1, 0, 0, 0], np.zeros((2, 1, 16)), r"shape \(2, 1, 16\); expected \(16,\)"),
+        (
+            np.tile([0, 0, 0, 1.0, 0, 0, 0], (2, 1)),
+            np.zeros((3, 16)),
+            "2 wrist poses for 3 joint vectors",
+        ),
+    ],
+)
+def test_hand_api_refuses_bad_wrists_and_joint_vectors(wrist, q, message):
+    hand = load_hand("allegro")
+    for api in (hand.link_poses, hand.fingertip_positions, hand.surface_points):
+        with pytest.raises(HandError, match=message):
+            api(wrist, q)
