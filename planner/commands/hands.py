@@ -5,8 +5,6 @@ from __future__ import annotations
 import argparse
 import json
 
-from models.hands import available_hands, load_hand
-
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
@@ -21,6 +19,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from models.hands import available_hands, load_hand  # torch: seconds, so only when run
+
     names = [args.hand] if args.hand else available_hands()
     hands = [load_hand(n).describe() for n in names]
     if args.json:
