@@ -1,7 +1,7 @@
 """LEAP as DexGraspBench's hand file builds it (Menagerie's right_hand.xml with DexGraspBench's
 simplified meshes): the project's MuJoCo model matches the file body by body, except where
-noted: the fingertips (the file collides with the vendor's tip meshes, four geoms on the distal
-links) and three exclusions the grasp program needs (each finger's base and middle links: their
+noted: the fingertips (both collide with the vendor's tip meshes, the project's as their convex
+hulls in models/hands/leap/meshes, four geoms on the distal links) and three exclusions the grasp program needs (each finger's base and middle links: their
 merged convex hulls overlap at the open pose)."""
 
 from __future__ import annotations
