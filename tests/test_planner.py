@@ -400,8 +400,7 @@ def test_a_hand_file_can_keep_the_palm_off_thin_parts(tmp_path):
 
     source = load_hand("leap").folder
     folder = tmp_path / "leap_no_palm"
-    folder.mkdir()
-    (folder / "hand.urdf").write_text((source / "hand.urdf").read_text())
+    shutil.copytree(source, folder)  # hand.urdf, hand.json and the collision meshes
     meta = json.loads((source / "hand.json").read_text())
     (folder / "hand.json").write_text(json.dumps({**meta, "palm_on_thin_parts": False}))
     proposals = FunctionalPlanner(load_hand(folder)).propose(make_object("pen", 8), "barrel")
