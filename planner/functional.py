@@ -542,8 +542,8 @@ def finish_grasp(
     program: GraspProgram, obj: ObjectModel, solved: SolveResult, instruction: str, protocol: str
 ) -> FinishedGrasp:
     """Pregrasp (anchor fingertips about 1 cm off the surface, offsets set by balanced squeeze
-    forces and shrunk where a link would be inside the object: GraspProgram.pregrasp), BODex
-    squeeze, the Grasp record, MuJoCo validation and the voted part: every planned or
+    forces and shrunk where a link, or the closing's path, would be inside the object:
+    GraspProgram.closing), BODex squeeze (as deep as the unshrunk offsets), the Grasp record, MuJoCo validation and the voted part: every planned or
     transferred grasp goes through these same steps. A grasp that slips is validated once more
     with the deeper squeeze of `program.retry_squeeze_depth`, where the hand has one, and the
     squeeze that held is the one recorded (`metrics["squeeze_depth"]`)."""
@@ -553,14 +553,14 @@ def finish_grasp(
     q_t = torch.tensor(solved.q[None])
     tips = hand.fingertip_positions(wrist_t, q_t, list(hand.meta.anchor_fingers))[0].numpy()
     nearest = np.argmin(np.linalg.norm(obj.points[None] - tips[:, None], axis=2), axis=1)
-    pre = program.pregrasp(solved.wrist, solved.q, obj.normals[nearest])
+    pre, scale = program.closing(solved.wrist, solved.q, obj.normals[nearest])
     grasp = Grasp(
         hand=hand.name,
         wrist_pos=solved.wrist[:3],
         wrist_quat=solved.wrist[3:7],
         grasp=solved.q,
         pregrasp=pre,
-        squeeze=program.squeeze(solved.q, pre),
+        squeeze=program.squeeze(solved.q, pre, scale=scale),
         joint_names=tuple(hand.joint_names),
         anchors=obj.points[nearest],
         instruction=instruction,
@@ -573,7 +573,7 @@ def finish_grasp(
     retry = program.retry_squeeze_depth
     if not result.success and retry is not None:
         t3 = time.perf_counter()
-        deeper = replace(grasp, squeeze=program.squeeze(solved.q, pre, retry), metrics={})
+        deeper = replace(grasp, squeeze=program.squeeze(solved.q, pre, retry, scale), metrics={})
         again = validate(deeper, pieces, hand, protocol)
         times["retry"] = time.perf_counter() - t3
         if again.success:

@@ -6,6 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pytest
+import torch
 import trimesh
 
 from models.errors import PlanningError
@@ -209,11 +210,74 @@ def test_pregrasp_offsets_shrink_until_clear_of_the_object(hand_name):
     assert program.hand_object_distance(wrist, pre) >= bound
     scales = [a for a, _ in PREGRASP_SCALES]
     assert any(np.allclose(pre, np.clip(q + a * inward, hand.lower, hand.upper)) for a in scales)
+    # the scale it settled on, for the squeeze
+    same, scale = program._clear_of_object(wrist, q, inward, anchor_joints)
+    assert np.array_equal(same, pre) and scale < 1
+    assert np.allclose(pre, np.clip(q + scale * inward, hand.lower, hand.upper))
     assert not np.allclose(pre, np.clip(q + inward, hand.lower, hand.upper))
     # an offset that opens the hand leaves the object alone and is kept as it is
     outward = -0.5 * inward
     kept = program.clear_of_object(wrist, q, outward, anchor_joints)
     assert np.allclose(kept, np.clip(q + outward, hand.lower, hand.upper))
+
+
+def test_the_closing_path_from_the_pregrasp_stays_clear_of_the_object():
+    """The validator closes along the straight joint path from the pregrasp to the grasp: a
+    finger clear of the part at both ends can sweep through it between them (ShadowHand on a
+    knife handle, 10 mm deep midway when only the pregrasp is checked)."""
+    hand = load_hand("shadow")
+    obj = make_object("knife", 13)
+    proposal = FunctionalPlanner(hand).propose(obj, "handle")[1]
+    solved = grasp_program(hand, obj.collision_pieces()).solve(
+        GraspTargets(
+            proposal.wrist,
+            proposal.q,
+            proposal.anchors,
+            proposal.normals,
+            palm_target=proposal.palm_target,
+        )
+    )
+    assert solved.ok, solved.message
+    wrist, q = solved.wrist, solved.q
+    tips = hand.fingertip_positions(
+        torch.tensor(wrist[None]), torch.tensor(q[None]), list(hand.meta.anchor_fingers)
+    )[0].numpy()
+    normals = obj.normals[np.argmin(np.linalg.norm(obj.points[None] - tips[:, None], axis=2), 1)]
+    deepest, closing, squeeze = {}, {}, {}
+    for checks in (0, 3):
+        program = grasp_program(
+            hand, obj.collision_pieces(), ProgramSettings(pregrasp_path_checks=checks)
+        )
+        pre, scale = closing[checks] = program.closing(wrist, q, normals)
+        assert np.array_equal(pre, program.pregrasp(wrist, q, normals))
+        bound = min(-program.settings.pregrasp_penetration, program.hand_object_distance(wrist, q))
+        assert program.hand_object_distance(wrist, pre) >= bound
+        deepest[checks] = min(
+            program.hand_object_distance(wrist, pre + a * (q - pre)) for a in np.linspace(0, 1, 9)
+        )
+        squeeze[checks] = program.squeeze(q, pre, scale=scale)
+    assert deepest[0] < -0.005  # the pregrasp alone was clear, its path 5+ mm inside
+    assert deepest[3] >= bound - 1e-4, deepest
+    # whatever shrank to clear the path (here the little finger's opening), the anchor
+    # fingers' squeeze did not
+    assert closing[3][1] <= closing[0][1]
+    anchor = closing[3][0] != q
+    assert anchor.any()
+    assert np.allclose(squeeze[3][anchor], squeeze[0][anchor], atol=1e-6)
+
+
+def test_a_shrunk_pregrasp_is_squeezed_as_deep_as_unshrunk():
+    hand = load_hand("allegro")
+    obj = make_object("bottle", 1)
+    program = grasp_program(hand, obj.collision_pieces())
+    q = (hand.lower + hand.upper) / 2
+    pre = q - 0.01 * hand.closing_direction
+    depth = program.squeeze_depth
+    assert np.allclose(program.squeeze(q, pre), q + depth * (q - pre))  # BODex's rule
+    assert np.allclose(program.squeeze(q, pre, scale=0.5), q + 2 * depth * (q - pre))
+    assert np.allclose(program.squeeze(q, pre, 3.0, 0.25), q + 12 * (q - pre))
+    before = grasp_program(hand, obj.collision_pieces(), ProgramSettings(full_squeeze=False))
+    assert np.allclose(before.squeeze(q, pre, scale=0.5), q + depth * (q - pre))
 
 
 def test_unknown_pregrasp_rule_is_a_clear_error():
