@@ -1,0 +1,251 @@
+"""The D(R,O) network: hand cloud + object cloud + instruction -> hand-object distance matrix.
+
+The hand is only a point cloud here (its fixed surface points at the first stage's wrist with
+the fingers open), so one network serves every hand. Both clouds go through a DGCNN encoder
+(static kNN graph on xyz, EdgeConv layers, per-point features); the instruction's sentence
+embedding scales and shifts both (FiLM); one cross-attention block each way lets hand and
+object features see each other (psi = phi + T(phi, other)); the kernel is an MLP on each pair
+[psi_R_i, psi_O_j], symmetric (one shared first layer), through softplus. Its first layer on
+a concatenation is a sum of two per-point projections, so those are computed per point and
+broadcast-added: the
+N x 512 pairs cost one small hidden layer each. The pair also gets the two points' distance in
+the input configuration (the open hand already sits at the grasp's wrist), a feature the
+network would otherwise have to rebuild from coordinates.
+
+Distances are predicted in centimetres inside (softplus output) and returned in metres.
+Weights are stored as safetensors with the config in the file's metadata.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import torch
+from torch import nn
+
+from models.errors import DrograspError
+
+TEXT_DIM = 384  # learned.text.EMBED_DIM; fixed here so the network imports no text model
+WEIGHTS = Path(__file__).parent / "weights" / "dro.safetensors"
+RETRAIN = "drograsp train dro --data data/grasps_v1 --out runs/dro (python -m learned.train_dro)"
+
+
+class DROWeightsError(DrograspError, RuntimeError):
+    """The D(R,O) weights file is missing, damaged or of another shape."""
+
+
+@dataclass(frozen=True)
+class DROConfig:
+    """Network sizes; the defaults are sized for a 2-core CPU (see DESIGN.md, Performance)."""
+
+    k: int = 16  # kNN graph neighbours of the DGCNN encoders
+    edge_widths: tuple[int, ...] = (32, 32, 64)
+    feature_dim: int = 64
+    heads: int = 4
+    kernel_hidden: int = 32
+    text_dim: int = TEXT_DIM
+    input_scale: float = 10.0  # xyz (m) x 10: decimetres, inputs of order 1
+    unit: float = 0.01  # metres per unit of the kernel's output: cm
+    input_distance: bool = True  # the pair's distance at the input pose as a kernel feature
+
+    def to_json(self) -> str:
+        return json.dumps(asdict(self))
+
+    @classmethod
+    def from_json(cls, text: str) -> DROConfig:
+        data = json.loads(text)
+        data["edge_widths"] = tuple(data["edge_widths"])
+        return cls(**data)
+
+
+def knn(xyz: torch.Tensor, k: int) -> torch.Tensor:
+    """(B, N, k) indices of each point's k nearest neighbours (itself included)."""
+    d = torch.cdist(xyz, xyz)
+    return torch.topk(d, min(k, xyz.shape[1]), dim=2, largest=False).indices
+
+
+class EdgeConv(nn.Module):
+    """DGCNN's edge convolution max_j act(W [x_i, x_j - x_i]) over the kNN graph.
+
+    With one linear layer per edge (as in DGCNN) and a monotone activation, the max over the
+    neighbours can be taken before the activation: max_j (A x_i + B (x_j - x_i)) = A x_i - B x_i
+    + max_j B x_j. So only the per-point projection B x is gathered over the graph (k times
+    less work than a per-edge layer; the encoders were 80% of a training step before). Both
+    max and min are kept, as a normalisation with a negative scale would pick the min."""
+
+    def __init__(self, cin: int, cout: int):
+        super().__init__()
+        self.centre = nn.Linear(cin, cout)
+        self.edge = nn.Linear(cin, cout, bias=False)
+        self.mix = nn.Linear(2 * cout, cout)
+        self.norm = nn.LayerNorm(cout)
+
+    def forward(self, x: torch.Tensor, idx: torch.Tensor) -> torch.Tensor:
+        e = self.edge(x)
+        rows = torch.arange(idx.shape[0], device=idx.device)[:, None, None]
+        neigh = e[rows, idx]  # (B, N, k, C); its backward scatters into (B, N, C) only
+        base = self.centre(x) - e
+        h = torch.cat([base + neigh.max(dim=2).values, base + neigh.min(dim=2).values], dim=-1)
+        return nn.functional.leaky_relu(self.norm(self.mix(h)), 0.2)
+
+
+class DGCNN(nn.Module):
+    """Per-point features from a cloud (B, N, C) whose first 3 channels are xyz."""
+
+    def __init__(self, cin: int, cfg: DROConfig):
+        super().__init__()
+        layers, prev = [], cin
+        for w in cfg.edge_widths:
+            layers.append(EdgeConv(prev, w))
+            prev = w
+        self.layers = nn.ModuleList(layers)
+        self.head = nn.Sequential(
+            nn.Linear(sum(cfg.edge_widths), cfg.feature_dim),
+            nn.LeakyReLU(0.2),
+            nn.Linear(cfg.feature_dim, cfg.feature_dim),
+        )
+        self.k = cfg.k
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        idx = knn(x[..., :3], self.k)
+        outs = []
+        for layer in self.layers:
+            x = layer(x, idx)
+            outs.append(x)
+        return self.head(torch.cat(outs, dim=-1))
+
+
+class CrossBlock(nn.Module):
+    """psi = phi + T(phi, other): cross-attention then a feed-forward layer, pre-norm."""
+
+    def __init__(self, dim: int, heads: int):
+        super().__init__()
+        self.nq, self.nkv, self.nff = nn.LayerNorm(dim), nn.LayerNorm(dim), nn.LayerNorm(dim)
+        self.attn = nn.MultiheadAttention(dim, heads, batch_first=True)
+        self.ff = nn.Sequential(nn.Linear(dim, 2 * dim), nn.GELU(), nn.Linear(2 * dim, dim))
+
+    def forward(self, x: torch.Tensor, other: torch.Tensor) -> torch.Tensor:
+        kv = self.nkv(other)
+        x = x + self.attn(self.nq(x), kv, kv, need_weights=False)[0]
+        return x + self.ff(self.nff(x))
+
+
+class DRONet(nn.Module):
+    """D(R,O): `forward(hand_xyz, obj, text)` -> (B, N, M) predicted distances in metres."""
+
+    def __init__(self, cfg: DROConfig | None = None):
+        super().__init__()
+        self.cfg = cfg = cfg or DROConfig()
+        f = cfg.feature_dim
+        self.hand_enc = DGCNN(3, cfg)
+        self.obj_enc = DGCNN(4, cfg)
+        self.film = nn.Linear(cfg.text_dim, 4 * f)  # gamma, beta for hand and object
+        nn.init.zeros_(self.film.weight)
+        nn.init.zeros_(self.film.bias)
+        self.hand_cross = CrossBlock(f, cfg.heads)
+        self.obj_cross = CrossBlock(f, cfg.heads)
+        self.pair = nn.Linear(f, cfg.kernel_hidden)
+        self.pair_d = nn.Parameter(torch.zeros(cfg.kernel_hidden))
+        self.pair_out = nn.Linear(cfg.kernel_hidden, 1)
+        nn.init.constant_(self.pair_out.bias, 2.0)  # start near a few cm, not near zero
+
+    def encode(
+        self, hand_xyz: torch.Tensor, obj: torch.Tensor, text: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Per-point features psi_R (B, N, f) and psi_O (B, M, f)."""
+        s = self.cfg.input_scale
+        phi_r = self.hand_enc(hand_xyz * s)
+        phi_o = self.obj_enc(torch.cat([obj[..., :3] * s, obj[..., 3:]], dim=-1))
+        g_r, b_r, g_o, b_o = self.film(text)[:, None].chunk(4, dim=-1)
+        phi_r = phi_r * (1 + g_r) + b_r
+        phi_o = phi_o * (1 + g_o) + b_o
+        return self.hand_cross(phi_r, phi_o), self.obj_cross(phi_o, phi_r)
+
+    def kernel(
+        self,
+        psi_r: torch.Tensor,
+        psi_o: torch.Tensor,
+        input_distance: torch.Tensor | None = None,
+    ) -> torch.Tensor:
+        """(B, N, M) distances (m) for every pair of the given point features. Both sides share
+        the first layer, so K(a, b) = K(b, a) by construction, at the cost of one pass (the
+        original averages two orders: twice the kernel, which dominates inference)."""
+        h = self.pair(psi_r)[:, :, None] + self.pair(psi_o)[:, None]
+        if input_distance is not None and self.cfg.input_distance:
+            h = h + (input_distance / self.cfg.unit)[..., None] * self.pair_d
+        z = self.pair_out(nn.functional.leaky_relu(h, 0.2))[..., 0]
+        return nn.functional.softplus(z) * self.cfg.unit
+
+    def forward(
+        self,
+        hand_xyz: torch.Tensor,
+        obj: torch.Tensor,
+        text: torch.Tensor,
+        hand_index: torch.Tensor | None = None,
+        obj_index: torch.Tensor | None = None,
+    ) -> torch.Tensor:
+        """hand_xyz (B, N, 3) m, obj (B, M, 4) xyz + Omega, text (B, 384) -> D (B, N', M') m
+        for the hand points `hand_index` (B, N') and object points `obj_index` (B, M')
+        (default: all): the encoders always see whole clouds, only the kernel is subsampled."""
+        psi_r, psi_o = self.encode(hand_xyz, obj, text)
+        xyz_r, xyz_o = hand_xyz, obj[..., :3]
+        if hand_index is not None:
+            psi_r = _take(psi_r, hand_index)
+            xyz_r = _take(xyz_r, hand_index)
+        if obj_index is not None:
+            psi_o = _take(psi_o, obj_index)
+            xyz_o = _take(xyz_o, obj_index)
+        return self.kernel(psi_r, psi_o, torch.cdist(xyz_r, xyz_o))
+
+
+def _take(x: torch.Tensor, idx: torch.Tensor) -> torch.Tensor:
+    return torch.gather(x, 1, idx[..., None].expand(-1, -1, x.shape[-1]))
+
+
+@dataclass
+class Checkpoint:
+    """What a weights file holds: the network and how it was trained."""
+
+    net: DRONet
+    meta: dict = field(default_factory=dict)
+
+
+def save_weights(net: DRONet, path: str | Path, meta: dict | None = None) -> None:
+    """The network's parameters as safetensors, with its config (and `meta`) in the header."""
+    from safetensors.torch import save_file
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tensors = {k: v.detach().contiguous().cpu() for k, v in net.state_dict().items()}
+    header = {"config": net.cfg.to_json(), "meta": json.dumps(meta or {})}
+    tmp = path.with_suffix(".tmp")
+    save_file(tensors, str(tmp), metadata=header)
+    tmp.replace(path)
+
+
+def load_weights(path: str | Path | None = None) -> Checkpoint:
+    """The network stored at `path` (default: the shipped weights). DROWeightsError naming the
+    file and the retraining command when it is missing, damaged or does not fit."""
+    from safetensors import SafetensorError
+    from safetensors.torch import load_file, safe_open
+
+    path = Path(path) if path is not None else WEIGHTS
+    if not path.is_file():
+        raise DROWeightsError(f"D(R,O) weights {path} not found; train them with `{RETRAIN}`")
+    try:
+        with safe_open(str(path), framework="pt") as f:
+            header = f.metadata() or {}
+        tensors = load_file(str(path))
+        cfg = DROConfig.from_json(header["config"])
+        meta = json.loads(header.get("meta", "{}"))
+        net = DRONet(cfg)
+        net.load_state_dict(tensors)
+    except (SafetensorError, OSError, KeyError, ValueError, TypeError, RuntimeError) as err:
+        raise DROWeightsError(
+            f"D(R,O) weights {path} are damaged or of another network "
+            f"({type(err).__name__}: {str(err)[:200]}); retrain with `{RETRAIN}`"
+        ) from None
+    net.eval()
+    return Checkpoint(net, meta)
