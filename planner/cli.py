@@ -38,6 +38,7 @@ COMMANDS: dict[str, str] = {
     "jobs": "make a batch jobs file (JSONL) for `drograsp batch`",
     "batch": "solve a jobs file offline (local process pool or Ray), resumably",
     "dataset": "generate, compact and inspect the functional grasp dataset",
+    "train": "train a learned model (the interaction diffusion model) on a grasp dataset",
 }
 
 EPILOG = (

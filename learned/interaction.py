@@ -1,0 +1,505 @@
+"""Interaction model: object cloud + instruction + hand -> wrist poses and four contact anchors.
+
+The design's first learned stage (issue 24). A DDPM over x = [wrist translation (3), rotation
+(6-D: the first two columns of the matrix, continuous unlike quaternions), 4 anchors (4 x 3)]
+= 21 numbers, denoised by a small transformer whose five tokens (wrist, four anchors) attend to
+PointNet++ tokens of the object, PointNet++ tokens of the hand's fixed surface points at its
+open pose (so any hand, a user's URDF too, is an input rather than a class id) and the sentence
+embedding of the instruction. Text is dropped in training so that sampling can use
+classifier-free guidance.
+
+Frames: everything happens in a canonical frame of the cloud: centred on its mean and turned
+about the vertical (z) axis so that the horizontal principal axis is x (its sign by the third
+moment). Turning the input about z or moving it therefore turns and moves the output exactly;
+tilts (up to 30 degrees) and scale (+-10%) are learned from augmentation. Coordinates inside
+the network are in decimetres (SCALE) so that they are of order one.
+
+    wrists, anchors = sample(cloud, "Use a mug by handle", "shadow", n=8)
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+import torch
+from scipy.spatial import cKDTree
+from scipy.spatial.transform import Rotation
+from torch import nn
+
+from learned.pointnet import Grouping, LevelConfig, PointNet2Encoder, grouping
+from learned.weights import WeightsError, load_weights, save_weights
+from models.errors import ObjectError
+
+SCALE = 10.0  # network units per metre
+X_DIM = 21  # translation 3 + rotation 6 + anchors 12
+NAME = "interaction"
+RETRAIN = "drograsp train interaction --data data/grasps_v1 --out runs/interaction --install"
+
+
+@dataclass
+class InteractionConfig:
+    """Sizes and settings. Defaults fit a 2-core CPU; scale widths, layers and points for a GPU."""
+
+    points: int = 2048  # object cloud points the encoder sees
+    object_levels: tuple[tuple[int, int, tuple[int, ...]], ...] = (
+        (256, 16, (32, 64)),
+        (48, 16, (96, 128)),
+    )
+    hand_levels: tuple[tuple[int, int, tuple[int, ...]], ...] = (
+        (64, 16, (32, 64)),
+        (16, 8, (96, 128)),
+    )
+    offset_scales: tuple[float, float] = (0.2, 0.5)  # network units (2 cm, 5 cm)
+    width: int = 128
+    heads: int = 4
+    layers: int = 3
+    ff: int = 256
+    text_dim: int = 384
+    diffusion_steps: int = 100  # T of the fixed cosine beta schedule
+    sample_steps: int = 10  # DDIM steps at sampling
+    guidance: float = 2.0  # classifier-free guidance scale (1 = conditional only)
+    text_dropout: float = 0.15  # share of training samples with the text dropped
+    anchor_weight: float = 1.0  # loss weight of the anchor dimensions vs the wrist's
+
+    def levels(self, which: str) -> tuple[LevelConfig, LevelConfig]:
+        raw = self.object_levels if which == "object" else self.hand_levels
+        a, b = (LevelConfig(int(c), int(k), tuple(int(w) for w in ws)) for c, k, ws in raw)
+        return a, b
+
+    def to_json(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_json(cls, data: dict[str, Any]) -> InteractionConfig:
+        known = {f for f in cls.__dataclass_fields__}
+        kw = {k: v for k, v in data.items() if k in known}
+        for key in ("object_levels", "hand_levels"):
+            if key in kw:
+                kw[key] = tuple((int(c), int(k), tuple(int(w) for w in ws)) for c, k, ws in kw[key])
+        if "offset_scales" in kw:
+            kw["offset_scales"] = tuple(float(s) for s in kw["offset_scales"])
+        return cls(**kw)
+
+
+# ---- frames ------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Frame:
+    """canonical = rot @ (p - centre): the cloud's centroid, yaw fixed by its shape."""
+
+    centre: np.ndarray  # (3,)
+    rot: np.ndarray  # (3, 3), a rotation about z
+
+    def to_canonical(self, p: np.ndarray) -> np.ndarray:
+        return (np.asarray(p) - self.centre) @ self.rot.T
+
+    def from_canonical(self, p: np.ndarray) -> np.ndarray:
+        return np.asarray(p) @ self.rot + self.centre
+
+
+def canonical_frame(points: np.ndarray) -> Frame:
+    """Centroid and a yaw from the horizontal principal axis, signed by the third moment (the
+    heavier tail, e.g. a mug's handle, points to +x). For shapes round about z the yaw is
+    arbitrary, as it may be: their grasps are too."""
+    pts = np.asarray(points, dtype=np.float64)
+    centre = pts.mean(axis=0)
+    xy = pts[:, :2] - centre[:2]
+    vals, vecs = np.linalg.eigh(xy.T @ xy / len(xy))
+    axis = vecs[:, 1]
+    if float(np.sum((xy @ axis) ** 3)) < 0:
+        axis = -axis
+    c, s = axis
+    rot = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
+    return Frame(centre, rot)
+
+
+def rot6_from_matrix(m: np.ndarray) -> np.ndarray:
+    """(..., 3, 3) -> (..., 6): the first two columns."""
+    return np.concatenate([m[..., :, 0], m[..., :, 1]], axis=-1)
+
+
+def matrix_from_rot6(r6: np.ndarray) -> np.ndarray:
+    """(..., 6) -> (..., 3, 3) by Gram-Schmidt (the nearest rotation for any 6 numbers)."""
+    a, b = r6[..., :3], r6[..., 3:]
+    x = a / np.maximum(np.linalg.norm(a, axis=-1, keepdims=True), 1e-9)
+    b = b - np.sum(x * b, axis=-1, keepdims=True) * x
+    y = b / np.maximum(np.linalg.norm(b, axis=-1, keepdims=True), 1e-9)
+    z = np.cross(x, y)
+    return np.stack([x, y, z], axis=-1)
+
+
+def encode_x(wrist: np.ndarray, anchors: np.ndarray, frame: Frame) -> np.ndarray:
+    """Grasps in the input frame -> (n, 21) in the canonical frame, network units (unnormalised).
+
+    wrist (n, 7) [x, y, z, qw, qx, qy, qz]; anchors (n, 4, 3)."""
+    wrist = np.asarray(wrist, dtype=np.float64).reshape(-1, 7)
+    anchors = np.asarray(anchors, dtype=np.float64).reshape(-1, 4, 3)
+    t = frame.to_canonical(wrist[:, :3]) * SCALE
+    rm = Rotation.from_quat(wrist[:, 3:], scalar_first=True).as_matrix()
+    r6 = rot6_from_matrix(frame.rot @ rm)
+    a = frame.to_canonical(anchors) * SCALE
+    return np.concatenate([t, r6, a.reshape(-1, 12)], axis=1)
+
+
+def decode_x(x: np.ndarray, frame: Frame) -> tuple[np.ndarray, np.ndarray]:
+    """(n, 21) canonical network units -> wrists (n, 7) and anchors (n, 4, 3) in the input frame."""
+    x = np.asarray(x, dtype=np.float64)
+    t = frame.from_canonical(x[:, :3] / SCALE)
+    rm = frame.rot.T @ matrix_from_rot6(x[:, 3:9])
+    q = Rotation.from_matrix(rm).as_quat(scalar_first=True)
+    q *= np.where(q[:, :1] < 0, -1.0, 1.0)  # qw >= 0, one of the two equal quaternions
+    a = frame.from_canonical(x[:, 9:].reshape(-1, 4, 3) / SCALE)
+    return np.concatenate([t, q], axis=1), a
+
+
+# ---- inputs ------------------------------------------------------------------------------------
+def check_cloud(cloud: object) -> np.ndarray:
+    """An (N, 3) cloud in metres, or an ObjectError (empty, NaN, wrong shape, millimetres)."""
+    from models.objects.loading import as_array
+    from models.objects.validation import check_coordinates
+
+    return check_coordinates(as_array(cloud, "cloud"))
+
+
+def subsample(points: np.ndarray, n: int, seed: int = 0) -> np.ndarray:
+    """n points of the cloud chosen by index (so the choice ignores the cloud's pose)."""
+    rng = np.random.default_rng(seed)
+    if len(points) == n:
+        return points
+    return points[rng.choice(len(points), size=n, replace=len(points) < n)]
+
+
+@dataclass
+class Prepared:
+    """One cloud made ready for the network: its frame, canonical points and grouping."""
+
+    frame: Frame
+    xyz: np.ndarray  # (P, 3) canonical, network units
+    groups: Grouping
+
+
+def prepare_cloud(points: np.ndarray, config: InteractionConfig, seed: int = 0) -> Prepared:
+    pts = subsample(np.asarray(points, dtype=np.float64), config.points, seed)
+    frame = canonical_frame(pts)
+    return Prepared(frame, frame.to_canonical(pts) * SCALE, grouping(pts, config.levels("object")))
+
+
+_hand_cache: dict[str, tuple[np.ndarray, Grouping]] = {}
+
+
+def hand_points(hand: Any, config: InteractionConfig) -> tuple[np.ndarray, Grouping]:
+    """The hand's fixed surface points at its open pose in its root frame (network units) and
+    their grouping; cached per hand name and level sizes."""
+    from models.hands import HandModel, load_hand
+
+    model = hand if isinstance(hand, HandModel) else load_hand(hand)
+    key = f"{model.folder}:{config.hand_levels}"
+    if key not in _hand_cache:
+        eye = np.array([0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0])
+        pts = model.surface_points(eye, model.open_pose)[0].detach().cpu().numpy()
+        _hand_cache[key] = (pts * SCALE, grouping(pts, config.levels("hand")))
+    return _hand_cache[key]
+
+
+# ---- network -----------------------------------------------------------------------------------
+def timestep_embedding(t: torch.Tensor, dim: int) -> torch.Tensor:
+    half = dim // 2
+    freqs = torch.exp(-math.log(10000.0) * torch.arange(half, dtype=torch.float32) / half)
+    args = t.float()[:, None] * freqs[None]
+    return torch.cat([torch.sin(args), torch.cos(args)], dim=-1)
+
+
+class Block(nn.Module):
+    """Pre-norm: self-attention among the grasp tokens, cross-attention to the condition, MLP."""
+
+    def __init__(self, d: int, heads: int, ff: int):
+        super().__init__()
+        self.n1, self.n2, self.n3 = nn.LayerNorm(d), nn.LayerNorm(d), nn.LayerNorm(d)
+        self.self_attn = nn.MultiheadAttention(d, heads, batch_first=True)
+        self.cross = nn.MultiheadAttention(d, heads, batch_first=True)
+        self.ff = nn.Sequential(nn.Linear(d, ff), nn.GELU(), nn.Linear(ff, d))
+
+    def forward(self, x: torch.Tensor, cond: torch.Tensor) -> torch.Tensor:
+        h = self.n1(x)
+        x = x + self.self_attn(h, h, h, need_weights=False)[0]
+        x = x + self.cross(self.n2(x), cond, cond, need_weights=False)[0]
+        return x + self.ff(self.n3(x))
+
+
+@dataclass
+class Condition:
+    """Encoded condition per batch row: tokens (B, M, d) and a global vector (B, d)."""
+
+    tokens: torch.Tensor
+    glob: torch.Tensor
+
+    def repeat(self, n: int) -> Condition:
+        return Condition(self.tokens.repeat_interleave(n, 0), self.glob.repeat_interleave(n, 0))
+
+
+class InteractionNet(nn.Module):
+    """Encoders and the noise predictor; x_mean / x_std (buffers) normalise the 21 numbers."""
+
+    def __init__(self, config: InteractionConfig):
+        super().__init__()
+        self.config = c = config
+        d = c.width
+        self.object_enc = PointNet2Encoder(c.levels("object"), d, c.offset_scales)
+        self.hand_enc = PointNet2Encoder(c.levels("hand"), d, c.offset_scales)
+        self.text_proj = nn.Sequential(nn.Linear(c.text_dim, d), nn.GELU(), nn.Linear(d, d))
+        self.null_text = nn.Parameter(torch.zeros(c.text_dim))
+        self.kind = nn.Parameter(torch.randn(3, d) * 0.02)  # object / hand / text token types
+        self.time = nn.Sequential(nn.Linear(d, d), nn.GELU(), nn.Linear(d, d))
+        self.glob = nn.Linear(3 * d, d)
+        self.wrist_in = nn.Linear(9, d)
+        self.anchor_in = nn.Linear(3, d)
+        self.slot = nn.Parameter(torch.randn(5, d) * 0.02)
+        self.blocks = nn.ModuleList([Block(d, c.heads, c.ff) for _ in range(c.layers)])
+        self.out_norm = nn.LayerNorm(d)
+        self.wrist_out = nn.Linear(d, 9)
+        self.anchor_out = nn.Linear(d, 3)
+        self.register_buffer("x_mean", torch.zeros(X_DIM))
+        self.register_buffer("x_std", torch.ones(X_DIM))
+        betas = cosine_betas(c.diffusion_steps)
+        self.register_buffer("alphas_bar", torch.cumprod(1.0 - betas, dim=0), persistent=False)
+
+    def encode(
+        self,
+        obj_xyz: torch.Tensor,
+        obj_groups: dict[str, torch.Tensor],
+        hand_xyz: torch.Tensor,
+        hand_groups: dict[str, torch.Tensor],
+        text: torch.Tensor,
+        drop_text: torch.Tensor | None = None,
+        hand_index: torch.Tensor | None = None,
+    ) -> Condition:
+        """Object (B, P, 3), hands (H, 512, 3), text (B, 384) -> condition. Row i uses hand
+        hand_index[i] (default: the one hand, H = 1); rows where drop_text is True see the
+        learned null text instead (classifier-free guidance)."""
+        b = obj_xyz.shape[0]
+        ot, _, og = self.object_enc(obj_xyz, obj_groups)
+        ht, _, hg = self.hand_enc(hand_xyz, hand_groups)
+        if hand_index is not None:
+            ht, hg = ht[hand_index], hg[hand_index]
+        elif ht.shape[0] != b:
+            ht, hg = ht.expand(b, -1, -1), hg.expand(b, -1)
+        if drop_text is not None:
+            text = torch.where(drop_text[:, None], self.null_text[None].expand(b, -1), text)
+        tt = self.text_proj(text)
+        tokens = torch.cat(
+            [ot + self.kind[0], ht + self.kind[1], (tt + self.kind[2]).unsqueeze(1)], dim=1
+        )
+        return Condition(tokens, self.glob(torch.cat([og, hg, tt], dim=-1)))
+
+    def forward(self, x: torch.Tensor, t: torch.Tensor, cond: Condition) -> torch.Tensor:
+        """Predicted noise (B, 21) for normalised noisy x (B, 21) at integer steps t (B,)."""
+        emb = self.time(timestep_embedding(t, self.config.width)) + cond.glob
+        tokens = torch.cat(
+            [self.wrist_in(x[:, None, :9]), self.anchor_in(x[:, 9:].reshape(-1, 4, 3))], dim=1
+        )
+        h = tokens + self.slot[None] + emb[:, None]
+        for block in self.blocks:
+            h = block(h, cond.tokens)
+        h = self.out_norm(h)
+        return torch.cat([self.wrist_out(h[:, 0]), self.anchor_out(h[:, 1:]).flatten(1)], dim=1)
+
+    # ---- diffusion ---------------------------------------------------------------------------
+    def loss(self, x0: torch.Tensor, cond: Condition, generator: torch.Generator | None = None):
+        """Simple epsilon MSE at uniform random steps; x0 normalised (B, 21)."""
+        b = x0.shape[0]
+        t = torch.randint(0, self.config.diffusion_steps, (b,), generator=generator)
+        eps = torch.randn(x0.shape, generator=generator)
+        ab = self.alphas_bar[t][:, None]
+        xt = ab.sqrt() * x0 + (1 - ab).sqrt() * eps
+        err = (self(xt, t, cond) - eps) ** 2
+        w = torch.ones(X_DIM)
+        w[9:] = self.config.anchor_weight
+        return (err * w).sum(1).mean() / w.sum()
+
+    @torch.no_grad()
+    def ddim(
+        self,
+        cond: Condition,
+        uncond: Condition | None,
+        n: int,
+        steps: int,
+        guidance: float,
+        generator: torch.Generator | None = None,
+    ) -> torch.Tensor:
+        """n normalised samples per condition row (deterministic DDIM, eta = 0): (B * n, 21)."""
+        c = cond.repeat(n)
+        u = uncond.repeat(n) if uncond is not None else None
+        rows = c.tokens.shape[0]
+        x = torch.randn((rows, X_DIM), generator=generator)
+        T = self.config.diffusion_steps
+        ts = torch.linspace(T - 1, 0, steps).round().long().tolist()
+        for i, t in enumerate(ts):
+            tt = torch.full((rows,), t, dtype=torch.long)
+            if u is not None and guidance != 1.0:
+                both = Condition(torch.cat([c.tokens, u.tokens]), torch.cat([c.glob, u.glob]))
+                e_c, e_u = self(torch.cat([x, x]), torch.cat([tt, tt]), both).chunk(2)
+                eps = e_u + guidance * (e_c - e_u)
+            else:
+                eps = self(x, tt, c)
+            ab = self.alphas_bar[t]
+            x0 = (x - (1 - ab).sqrt() * eps) / ab.sqrt()
+            x0 = x0.clamp(-6, 6)
+            ab_prev = self.alphas_bar[ts[i + 1]] if i + 1 < len(ts) else torch.tensor(1.0)
+            x = ab_prev.sqrt() * x0 + (1 - ab_prev).sqrt() * eps
+        return x
+
+
+def cosine_betas(steps: int, s: float = 0.008) -> torch.Tensor:
+    """The fixed cosine schedule (Nichol and Dhariwal), betas capped at 0.999."""
+    t = torch.linspace(0, steps, steps + 1, dtype=torch.float64) / steps
+    f = torch.cos((t + s) / (1 + s) * math.pi / 2) ** 2
+    ab = f / f[0]
+    return (1 - ab[1:] / ab[:-1]).clamp(max=0.999).float()
+
+
+# ---- the model as a whole ----------------------------------------------------------------------
+@dataclass
+class InteractionModel:
+    """A network with its config and provenance; `sample` is the public entry point."""
+
+    net: InteractionNet
+    config: InteractionConfig
+    info: dict[str, Any] = field(default_factory=dict)
+
+    @classmethod
+    def new(cls, config: InteractionConfig | None = None, seed: int = 0) -> InteractionModel:
+        torch.manual_seed(seed)
+        config = config or InteractionConfig()
+        return cls(InteractionNet(config), config)
+
+    def save(self, folder: str, name: str = NAME) -> None:
+        cfg = {
+            "config": self.config.to_json(),
+            "info": self.info,
+            "format": "drograsp-interaction/1",
+        }
+        save_weights(name, self.net.state_dict(), cfg, folder)
+
+    @classmethod
+    def load(cls, folder: str | None = None, name: str = NAME) -> InteractionModel:
+        state, cfg = load_weights(name, RETRAIN, folder)
+        where = f"{folder or 'learned/weights'}/{name}"
+        if cfg.get("format") != "drograsp-interaction/1" or "config" not in cfg:
+            raise WeightsError(
+                f"{where}.json is not an interaction model config; remake it with `{RETRAIN}`"
+            )
+        try:
+            config = InteractionConfig.from_json(cfg["config"])
+            net = InteractionNet(config)
+            net.load_state_dict(state)
+        except (TypeError, ValueError, RuntimeError, KeyError) as err:
+            raise WeightsError(
+                f"{where}.safetensors does not fit the model's code ({type(err).__name__}: "
+                f"{str(err)[:300]}); remake it with `{RETRAIN}`"
+            ) from None
+        net.eval()
+        return cls(net, config, cfg.get("info", {}))
+
+    def condition(
+        self, prepared: list[Prepared], hand: Any, text_vecs: np.ndarray, drop: bool = False
+    ) -> Condition:
+        hxyz, hgroups = hand_points(hand, self.config)
+        obj = torch.from_numpy(np.stack([p.xyz for p in prepared])).float()
+        groups = {
+            k: torch.stack([torch.from_numpy(getattr(p.groups, k)) for p in prepared])
+            for k in ("centres1", "nbrs1", "centres2", "nbrs2")
+        }
+        hgt = {k: v[None] for k, v in hgroups.tensors().items()}
+        txt = torch.from_numpy(np.asarray(text_vecs, dtype=np.float32))
+        dropped = torch.full((len(prepared),), drop) if drop else None
+        return self.net.encode(obj, groups, torch.from_numpy(hxyz).float()[None], hgt, txt, dropped)
+
+    @torch.no_grad()
+    def sample_prepared(
+        self,
+        prepared: Prepared,
+        text_vec: np.ndarray,
+        hand: Any,
+        n: int,
+        guidance: float | None = None,
+        steps: int | None = None,
+        seed: int | None = 0,
+    ) -> np.ndarray:
+        """(n, 21) canonical network-unit samples for one prepared cloud."""
+        self.net.eval()
+        g = None if seed is None else torch.Generator().manual_seed(seed)
+        guidance = self.config.guidance if guidance is None else float(guidance)
+        cond = self.condition([prepared], hand, text_vec[None])
+        uncond = (
+            self.condition([prepared], hand, text_vec[None], drop=True) if guidance != 1.0 else None
+        )
+        x = self.net.ddim(cond, uncond, n, steps or self.config.sample_steps, guidance, g)
+        return (x * self.net.x_std + self.net.x_mean).numpy().astype(np.float64)
+
+    def sample(
+        self,
+        cloud: object,
+        text: str,
+        hand: Any,
+        n: int = 8,
+        guidance: float | None = None,
+        steps: int | None = None,
+        seed: int | None = 0,
+        snap: bool = True,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """n wrist poses (n, 7) [x, y, z, qw, qx, qy, qz] and anchors (n, 4, 3) in the cloud's
+        frame; anchors snapped to the nearest cloud points unless snap=False."""
+        from learned.text import encode
+
+        if isinstance(n, bool) or not isinstance(n, int | np.integer) or n < 1:
+            raise ValueError(f"n must be a positive integer, got {n!r}")
+        pts = check_cloud(cloud)
+        vec = encode([text])[0]
+        prepared = prepare_cloud(pts, self.config)
+        x = self.sample_prepared(prepared, vec, hand, int(n), guidance, steps, seed)
+        wrists, anchors = decode_x(x, prepared.frame)
+        if snap:
+            anchors = snap_to_cloud(anchors, pts)
+        return wrists, anchors
+
+
+def snap_to_cloud(anchors: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Each anchor moved to its nearest cloud point."""
+    idx = cKDTree(points).query(anchors.reshape(-1, 3))[1]
+    return points[idx].reshape(anchors.shape)
+
+
+_loaded: dict[str, InteractionModel] = {}
+_load_lock = threading.Lock()
+
+
+def load_model(folder: str | None = None, name: str = NAME) -> InteractionModel:
+    """The named model from `folder` (default: the package's shipped weights), loaded once."""
+    key = f"{folder}:{name}"
+    with _load_lock:
+        if key not in _loaded:
+            _loaded[key] = InteractionModel.load(folder, name)
+        return _loaded[key]
+
+
+def sample(
+    cloud: object,
+    text: str,
+    hand: Any,
+    n: int = 8,
+    guidance: float | None = None,
+    steps: int | None = None,
+    seed: int | None = 0,
+    model: InteractionModel | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """n wrist poses (n, 7) [x, y, z, qw, qx, qy, qz] and contact anchors (n, 4, 3), in the
+    cloud's frame, for the instruction and hand (a name, a folder, or a HandModel); drawn in one
+    batch by the shipped model unless `model` is given."""
+    if not isinstance(cloud, np.ndarray | list | tuple) and not hasattr(cloud, "detach"):
+        raise ObjectError(
+            f"cannot use {type(cloud).__name__} as a cloud: give an (N, 3) array in metres"
+        )
+    return (model or load_model()).sample(cloud, text, hand, n, guidance, steps, seed)

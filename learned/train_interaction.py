@@ -1,0 +1,513 @@
+"""Training of the interaction model: DDPM noise prediction on augmented, paraphrased grasps.
+
+Run by `drograsp train interaction --data DIR --out DIR [--minutes M] [--seed S]`. Objects are
+regenerated once from (category, seed) and their point samples cached on disk (the library
+takes ~0.5 s per object), so a step only gathers arrays. Each step augments (any yaw, tilt up to
+30 degrees, scale +-10%), rewrites the instruction from the training paraphrase bank, drops the
+text for classifier-free guidance, and takes an AdamW step; an exponential moving average of the
+weights is what ships. Checkpoints (safetensors + JSON, no pickle) are written every few minutes
+and a rerun of the same command resumes from the last one.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import random
+import shutil
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from scipy.spatial.transform import Rotation
+
+from learned.dataset import DatasetError, GraspArrays, load_split
+from learned.interaction import (
+    NAME,
+    X_DIM,
+    InteractionConfig,
+    InteractionModel,
+    canonical_frame,
+    encode_x,
+    hand_points,
+)
+from learned.paraphrase import request_of, train_paraphrases
+from learned.pointnet import grouping
+from learned.weights import WEIGHTS_DIR, load_weights, save_weights
+
+CHECKPOINT = "checkpoint"
+MAX_TILT = math.radians(30.0)
+SCALE_RANGE = 0.1
+
+
+@dataclass
+class TrainSettings:
+    """How long and how: time budget, batch, optimiser, augmentation, checkpoint interval."""
+
+    minutes: float = 15.0
+    max_steps: int | None = None
+    seed: int = 0
+    batch: int = 32  # grasps per step (each with its own object sample)
+    repeats: int = 4  # noise draws per grasp (the encoders run once per grasp)
+    lr: float = 1e-3
+    warmup: int = 200
+    weight_decay: float = 1e-4
+    ema: float = 0.995
+    canonical_share: float = 0.3  # share of steps that keep the dataset's canonical instruction
+    samples_per_object: int = 4  # cached 2048-point samples per object
+    checkpoint_minutes: float = 3.0
+    threads: int = 1
+    augment: bool = True
+    progress: bool = True
+
+
+@dataclass
+class TrainResult:
+    steps: int
+    minutes: float
+    final_loss: float
+    val_loss: float | None
+    weights: Path
+    curve: Path
+    resumed_from: int = 0
+    history: list[dict[str, float]] = field(default_factory=list)
+
+
+# ---- object point cache ------------------------------------------------------------------------
+class ObjectPoints:
+    """Per (category, seed): K cached 2048-point samples (object frame, metres), their labels
+    (scoring only, never a model input) and part names; on disk as one npz per object."""
+
+    def __init__(self, folder: str | Path, points: int = 2048, samples: int = 4):
+        self.folder = Path(folder)
+        self.points, self.samples = points, samples
+        self._mem: dict[tuple[str, int], dict[str, Any]] = {}
+
+    def get(self, category: str, seed: int) -> dict[str, Any]:
+        key = (category, int(seed))
+        if key in self._mem:
+            return self._mem[key]
+        path = self.folder / f"{category}_{int(seed)}_{self.points}x{self.samples}.npz"
+        item = None
+        if path.is_file():
+            try:
+                with np.load(path, allow_pickle=False) as z:
+                    item = {k: z[k] for k in z.files}
+            except (OSError, ValueError, EOFError):
+                item = None
+        if item is None:
+            from models.objects import make_object
+
+            obj = make_object(category, int(seed))
+            dense, labels = obj.points, obj.point_labels
+            idx = np.stack(
+                [
+                    np.random.default_rng(s).choice(len(dense), self.points, replace=False)
+                    for s in range(self.samples)
+                ]
+            )
+            item = {
+                "points": dense[idx].astype(np.float32),
+                "labels": labels[idx].astype(np.int16),
+                "part_names": np.array(obj.part_names),
+            }
+            self.folder.mkdir(parents=True, exist_ok=True)
+            tmp = path.with_suffix(".tmp.npz")
+            np.savez(tmp, **item)
+            os.replace(tmp, path)
+        item["groups"] = None
+        self._mem[key] = item
+        return item
+
+    def groups(self, category: str, seed: int, config: InteractionConfig) -> list:
+        item = self.get(category, seed)
+        if item["groups"] is None:
+            item["groups"] = [grouping(p, config.levels("object")) for p in item["points"]]
+        return item["groups"]
+
+
+# ---- rows --------------------------------------------------------------------------------------
+def usable_rows(data: GraspArrays) -> np.ndarray:
+    """Rows to learn from: all but those known to miss their intent (intent_ok 0; 1 is a
+    pass, -1 or an absent column means not checked)."""
+    ok = data.arrays.get("intent_ok")
+    if ok is None:
+        return np.arange(len(data))
+    return np.flatnonzero(np.asarray(ok) != 0)
+
+
+def random_rotation(rng: np.random.Generator) -> np.ndarray:
+    """Any yaw, then a tilt about a random horizontal axis of up to 30 degrees."""
+    yaw = Rotation.from_euler("z", rng.uniform(0, 2 * math.pi))
+    axis_angle = rng.uniform(0, 2 * math.pi)
+    axis = np.array([math.cos(axis_angle), math.sin(axis_angle), 0.0])
+    tilt = Rotation.from_rotvec(axis * rng.uniform(0, MAX_TILT))
+    return (tilt * yaw).as_matrix()
+
+
+def augment(
+    points: np.ndarray, wrist: np.ndarray, anchors: np.ndarray, rng: np.random.Generator
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The same random rotation and scale applied to cloud, wrist and anchors."""
+    rot = random_rotation(rng)
+    s = rng.uniform(1 - SCALE_RANGE, 1 + SCALE_RANGE)
+    w = wrist.astype(np.float64).copy()
+    w[:3] = s * rot @ w[:3]
+    rm = rot @ Rotation.from_quat(w[3:], scalar_first=True).as_matrix()
+    w[3:] = Rotation.from_matrix(rm).as_quat(scalar_first=True)
+    return s * points @ rot.T, w, s * anchors @ rot.T
+
+
+class Batcher:
+    """Makes training batches: augmented canonical clouds with their groupings, x, texts."""
+
+    def __init__(
+        self,
+        data: GraspArrays,
+        rows: np.ndarray,
+        cache: ObjectPoints,
+        config: InteractionConfig,
+        settings: TrainSettings,
+    ):
+        from learned.text import encode
+
+        self.data, self.rows, self.cache = data, rows, cache
+        self.config, self.settings = config, settings
+        meta, a = data.meta, data.arrays
+        self.categories = [meta["categories"][i] for i in a["category"][rows]]
+        self.seeds = a["seed"][rows].astype(int)
+        self.hands = [meta["hands"][i] for i in a["hand"][rows]]
+        self.hand_names = sorted(set(self.hands))
+        self.hand_index = np.array([self.hand_names.index(h) for h in self.hands])
+        instr = [meta["instructions"][i] for i in a["instruction"][rows]]
+        self.instr_names = sorted(set(instr))
+        self.instr_index = np.array([self.instr_names.index(t) for t in instr])
+        # paraphrases per instruction: index 0 is the canonical text
+        self.texts: list[list[str]] = []
+        for t in self.instr_names:
+            try:
+                self.texts.append([t, *train_paraphrases(request_of(t))[1:]])
+            except ValueError:  # an instruction the parser cannot read: canonical only
+                self.texts.append([t])
+        flat = sorted({t for ts in self.texts for t in ts})
+        vecs = encode(flat)
+        lookup = {t: v for t, v in zip(flat, vecs, strict=True)}
+        self.vecs = [np.stack([lookup[t] for t in ts]) for ts in self.texts]
+        for cat, seed in sorted(set(zip(self.categories, self.seeds, strict=True))):
+            cache.groups(cat, seed, config)
+        self.wrist = a["wrist"][rows].astype(np.float64)
+        self.anchors = a["anchors"][rows].astype(np.float64)
+        hp = [hand_points(h, config) for h in self.hand_names]
+        self.hand_xyz = torch.from_numpy(np.stack([p for p, _ in hp])).float()
+        self.hand_groups = {
+            k: torch.stack([g.tensors()[k] for _, g in hp])
+            for k in ("centres1", "nbrs1", "centres2", "nbrs2")
+        }
+
+    def __len__(self) -> int:
+        return len(self.rows)
+
+    def make(self, picks: np.ndarray, rng: np.random.Generator, pyrng: random.Random) -> dict:
+        xyz, xs, texts = [], [], []
+        groups: dict[str, list] = {k: [] for k in ("centres1", "nbrs1", "centres2", "nbrs2")}
+        for i in picks:
+            cat, seed = self.categories[i], int(self.seeds[i])
+            item = self.cache.get(cat, seed)
+            k = int(rng.integers(len(item["points"])))
+            pts = item["points"][k].astype(np.float64)
+            w, anc = self.wrist[i], self.anchors[i]
+            if self.settings.augment:
+                pts, w, anc = augment(pts, w, anc, rng)
+            frame = canonical_frame(pts)
+            xyz.append(frame.to_canonical(pts) * 10.0)
+            xs.append(encode_x(w[None], anc[None], frame)[0])
+            g = self.cache.groups(cat, seed, self.config)[k]
+            for key in groups:
+                groups[key].append(getattr(g, key))
+            choices = self.vecs[self.instr_index[i]]
+            canon = pyrng.random() < self.settings.canonical_share or len(choices) == 1
+            texts.append(choices[0 if canon else pyrng.randrange(1, len(choices))])
+        return {
+            "xyz": torch.from_numpy(np.stack(xyz)).float(),
+            "groups": {k: torch.from_numpy(np.stack(v)) for k, v in groups.items()},
+            "x": torch.from_numpy(np.stack(xs)).float(),
+            "text": torch.from_numpy(np.stack(texts)).float(),
+            "hand": torch.from_numpy(self.hand_index[picks]),
+        }
+
+
+def batch_loss(
+    model: InteractionModel,
+    batcher: Batcher,
+    batch: dict,
+    repeats: int,
+    drop: float,
+    generator: torch.Generator,
+) -> torch.Tensor:
+    net = model.net
+    b = batch["x"].shape[0]
+    dropped = torch.rand(b, generator=generator) < drop
+    cond = net.encode(
+        batch["xyz"],
+        batch["groups"],
+        batcher.hand_xyz,
+        batcher.hand_groups,
+        batch["text"],
+        dropped,
+        hand_index=batch["hand"],
+    )
+    x0 = (batch["x"] - net.x_mean) / net.x_std
+    return net.loss(x0.repeat_interleave(repeats, 0), cond.repeat(repeats), generator)
+
+
+def x_statistics(batcher: Batcher, rng: np.random.Generator, n: int = 4096) -> tuple:
+    """Mean and spread of the 21 numbers under augmentation; rotation dims share one scale so
+    the 6-D rotation keeps its geometry, anchors share the translation's."""
+    picks = rng.integers(0, len(batcher), size=min(n, 4 * len(batcher)))
+    xs = []
+    for i in picks:
+        item = batcher.cache.get(batcher.categories[i], int(batcher.seeds[i]))
+        pts, w, a = augment(
+            item["points"][0].astype(np.float64), batcher.wrist[i], batcher.anchors[i], rng
+        )
+        xs.append(encode_x(w[None], a[None], canonical_frame(pts))[0])
+    x = np.stack(xs)
+    mean = x.mean(0)
+    mean[3:9] = 0.0
+    std = np.empty(X_DIM)
+    std[:3] = x[:, :3].std(0).mean()
+    std[3:9] = 0.5
+    std[9:] = x[:, 9:].std(0).mean()
+    return torch.tensor(mean, dtype=torch.float32), torch.tensor(std, dtype=torch.float32)
+
+
+# ---- checkpoints -------------------------------------------------------------------------------
+def _save_checkpoint(out: Path, model, ema, opt, state: dict) -> None:
+    tensors = {f"net.{k}": v for k, v in model.net.state_dict().items()}
+    tensors.update({f"ema.{k}": v for k, v in ema.items()})
+    opt_state = opt.state_dict()
+    for pid, st in opt_state["state"].items():
+        for k, v in st.items():
+            tensors[f"opt.{pid}.{k}"] = torch.as_tensor(v)
+    save_weights(CHECKPOINT, tensors, {**state, "format": "drograsp-interaction-checkpoint/1"}, out)
+
+
+def _load_checkpoint(out: Path, model, ema, opt) -> dict | None:
+    if not (out / f"{CHECKPOINT}.safetensors").is_file():
+        return None
+    tensors, state = load_weights(CHECKPOINT, "delete the checkpoint and train again", out)
+    model.net.load_state_dict({k[4:]: v for k, v in tensors.items() if k.startswith("net.")})
+    for k in ema:
+        ema[k].copy_(tensors[f"ema.{k}"])
+    opt_state = opt.state_dict()
+    for pid in range(len(opt_state["param_groups"][0]["params"])):
+        st = {k.split(".", 2)[2]: v for k, v in tensors.items() if k.startswith(f"opt.{pid}.")}
+        if st:
+            opt_state["state"][pid] = st
+    opt.load_state_dict(opt_state)
+    return state
+
+
+def write_curve(history: list[dict[str, float]], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6, 4))
+    steps = [h["step"] for h in history]
+    loss = np.array([h["loss"] for h in history])
+    if len(loss):
+        k = max(1, len(loss) // 50)
+        smooth = np.convolve(loss, np.ones(k) / k, mode="valid")
+        ax.plot(steps, loss, alpha=0.3, label="train (per step)")
+        ax.plot(steps[k - 1 :], smooth, label=f"train ({k}-step mean)")
+    val = [(h["step"], h["val"]) for h in history if "val" in h]
+    if val:
+        ax.plot(*zip(*val, strict=True), "o-", label="val (EMA weights)")
+    ax.set_xlabel("step")
+    ax.set_ylabel("noise MSE")
+    ax.set_yscale("log")
+    ax.legend()
+    ax.set_title("interaction model training")
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+# ---- the loop ----------------------------------------------------------------------------------
+def train(
+    data: str | Path,
+    out: str | Path,
+    settings: TrainSettings | None = None,
+    config: InteractionConfig | None = None,
+    install: bool = False,
+) -> TrainResult:
+    """Train (or resume) in `out`; write weights, config, loss curve; optionally install them
+    as the package's shipped weights."""
+    settings = settings or TrainSettings()
+    config = config or InteractionConfig()
+    torch.set_num_threads(settings.threads)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    train_data = load_split(data, "train")
+    rows = usable_rows(train_data)
+    if len(rows) == 0:
+        raise DatasetError(f"{data}: the train split has no usable rows")
+    cache = ObjectPoints(out / "object_points", config.points, settings.samples_per_object)
+    rng = np.random.default_rng(settings.seed)
+    pyrng = random.Random(settings.seed)
+    gen = torch.Generator().manual_seed(settings.seed)
+    model = InteractionModel.new(config, settings.seed)
+    batcher = Batcher(train_data, rows, cache, config, settings)
+    val_batch = _val_batch(data, cache, config, settings)
+
+    opt = torch.optim.AdamW(
+        model.net.parameters(), lr=settings.lr, weight_decay=settings.weight_decay
+    )
+    ema = {k: v.detach().clone() for k, v in model.net.state_dict().items()}
+    state = _load_checkpoint(out, model, ema, opt)
+    if state is None:
+        mean, std = x_statistics(batcher, rng)
+        model.net.x_mean.copy_(mean)
+        model.net.x_std.copy_(std)
+        ema["x_mean"].copy_(mean)
+        ema["x_std"].copy_(std)
+        state = {"step": 0, "elapsed": 0.0, "history": [], "seed": settings.seed}
+    else:
+        rng = np.random.default_rng([settings.seed, state["step"]])
+        pyrng = random.Random(settings.seed * 1_000_003 + state["step"])
+        gen = torch.Generator().manual_seed(settings.seed * 1_000_003 + state["step"])
+    resumed = int(state["step"])
+    step, elapsed, history = int(state["step"]), float(state["elapsed"]), list(state["history"])
+    budget = settings.minutes * 60.0
+
+    from tqdm import tqdm
+
+    bar = tqdm(
+        total=settings.max_steps,
+        initial=step,
+        disable=not settings.progress,
+        desc="train interaction",
+        unit="step",
+    )
+    start = time.monotonic() - elapsed
+    last_ckpt = time.monotonic()
+
+    def checkpoint() -> None:
+        vl = _val_loss(model, ema, batcher, val_batch, settings)
+        if vl is not None and history:
+            history[-1]["val"] = vl
+        _save_checkpoint(
+            out,
+            model,
+            ema,
+            opt,
+            {
+                "step": step,
+                "elapsed": time.monotonic() - start,
+                "history": history,
+                "seed": settings.seed,
+                "settings": asdict(settings),
+                "config": config.to_json(),
+            },
+        )
+        write_curve(history, out / "loss.png")
+
+    model.net.train()
+    while True:
+        if settings.max_steps is not None and step >= settings.max_steps:
+            break
+        if time.monotonic() - start >= budget:
+            break
+        lr = settings.lr * min(1.0, (step + 1) / settings.warmup)
+        for g in opt.param_groups:
+            g["lr"] = lr
+        picks = rng.integers(0, len(batcher), size=settings.batch)
+        batch = batcher.make(picks, rng, pyrng)
+        loss = batch_loss(model, batcher, batch, settings.repeats, config.text_dropout, gen)
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        torch.nn.utils.clip_grad_norm_(model.net.parameters(), 1.0)
+        opt.step()
+        with torch.no_grad():
+            for k, v in model.net.state_dict().items():
+                if v.dtype.is_floating_point:
+                    ema[k].mul_(settings.ema).add_(v.detach(), alpha=1 - settings.ema)
+                else:
+                    ema[k].copy_(v)
+        step += 1
+        loss_value = float(loss.detach())
+        history.append({"step": step, "loss": loss_value})
+        bar.update(1)
+        bar.set_postfix(loss=f"{loss_value:.4f}")
+        if time.monotonic() - last_ckpt >= settings.checkpoint_minutes * 60.0:
+            checkpoint()
+            last_ckpt = time.monotonic()
+    bar.close()
+    checkpoint()
+
+    final = InteractionModel.new(config, settings.seed)
+    final.net.load_state_dict(ema)
+    final.info = {
+        "data": str(data),
+        "data_rows": int(len(rows)),
+        "steps": step,
+        "minutes": round((time.monotonic() - start) / 60.0, 2),
+        "seed": settings.seed,
+        "final_loss": float(np.mean([h["loss"] for h in history[-50:]])) if history else None,
+        "val_loss": next((h["val"] for h in reversed(history) if "val" in h), None),
+        "command": f"drograsp train interaction --data {data} --out {out} --minutes "
+        f"{settings.minutes:g} --seed {settings.seed}",
+    }
+    final.save(str(out))
+    if install:
+        WEIGHTS_DIR.mkdir(parents=True, exist_ok=True)
+        for suffix in (".safetensors", ".json"):
+            shutil.copyfile(out / f"{NAME}{suffix}", WEIGHTS_DIR / f"{NAME}{suffix}")
+    (out / "history.json").write_text(json.dumps(history[-2000:]), encoding="utf-8")
+    return TrainResult(
+        steps=step,
+        minutes=final.info["minutes"],
+        final_loss=final.info["final_loss"] or float("nan"),
+        val_loss=final.info["val_loss"],
+        weights=out / f"{NAME}.safetensors",
+        curve=out / "loss.png",
+        resumed_from=resumed,
+        history=history,
+    )
+
+
+def _val_batch(data, cache, config, settings) -> Batcher | None:
+    try:
+        val = load_split(data, "val")
+    except DatasetError:
+        return None
+    rows = usable_rows(val)
+    if len(rows) == 0:
+        return None
+    rows = rows[np.random.default_rng(0).permutation(len(rows))[:256]]
+    quiet = TrainSettings(**{**asdict(settings), "augment": False, "canonical_share": 1.0})
+    return Batcher(val, rows, cache, config, quiet)
+
+
+def _val_loss(model, ema, batcher, val: Batcher | None, settings) -> float | None:
+    """Noise MSE of the EMA weights on fixed val grasps, noise and steps (comparable over time)."""
+    if val is None:
+        return None
+    live = {k: v.clone() for k, v in model.net.state_dict().items()}
+    model.net.load_state_dict(ema)
+    model.net.eval()
+    try:
+        with torch.no_grad():
+            rng = np.random.default_rng(1)
+            batch = val.make(np.arange(len(val)), rng, random.Random(1))
+            gen = torch.Generator().manual_seed(1)
+            return float(batch_loss(model, val, batch, 2, 0.0, gen))
+    finally:
+        model.net.load_state_dict(live)
+        model.net.train()

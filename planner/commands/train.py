@@ -1,0 +1,74 @@
+"""`drograsp train`: train a learned stage on a dataset folder (resumable, seeded)."""
+
+from __future__ import annotations
+
+import argparse
+
+from planner.commands.args import non_negative_int, positive_float, positive_int
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "train",
+        help="train a learned model (the interaction diffusion model) on a grasp dataset",
+        description="Train a learned stage on a dataset made by `drograsp dataset generate`. "
+        "Rerunning the same command resumes from the last checkpoint in --out.",
+    )
+    tsub = p.add_subparsers(dest="train_command", metavar="MODEL", required=True)
+    i = tsub.add_parser(
+        "interaction",
+        help="object cloud + instruction + hand -> wrist pose and anchors (diffusion)",
+        description="Train the interaction model (learned.interaction): writes OUT/"
+        "interaction.safetensors + .json, OUT/loss.png and checkpoints; --install also copies "
+        "the weights into the package (learned/weights/) where `sample` loads them.",
+    )
+    i.add_argument("--data", required=True, metavar="DIR", help="dataset folder")
+    i.add_argument("--out", required=True, metavar="DIR", help="run folder (checkpoints, curve)")
+    i.add_argument(
+        "--minutes",
+        type=positive_float,
+        default=15.0,
+        help="wall-clock budget of the whole run, resumed parts included (default 15)",
+    )
+    i.add_argument("--steps", type=positive_int, default=None, help="stop after this many steps")
+    i.add_argument("--seed", type=non_negative_int, default=0)
+    i.add_argument("--batch", type=positive_int, default=32, help="grasps per step (default 32)")
+    i.add_argument("--threads", type=positive_int, default=1, help="torch threads (default 1)")
+    i.add_argument("--checkpoint-minutes", type=positive_float, default=3.0, help="default 3")
+    i.add_argument(
+        "--width", type=positive_int, default=None, help="model width (default: the config's)"
+    )
+    i.add_argument("--layers", type=positive_int, default=None, help="denoiser layers")
+    i.add_argument(
+        "--install",
+        action="store_true",
+        help="copy the final weights to learned/weights/ (the shipped model)",
+    )
+    i.set_defaults(func=run_interaction)
+
+
+def run_interaction(args: argparse.Namespace) -> int:
+    from learned.interaction import InteractionConfig
+    from learned.train_interaction import TrainSettings, train
+
+    config = InteractionConfig()
+    if args.width is not None:
+        config.width = args.width
+    if args.layers is not None:
+        config.layers = args.layers
+    settings = TrainSettings(
+        minutes=args.minutes,
+        max_steps=args.steps,
+        seed=args.seed,
+        batch=args.batch,
+        threads=args.threads,
+        checkpoint_minutes=args.checkpoint_minutes,
+    )
+    result = train(args.data, args.out, settings, config, install=args.install)
+    val = "n/a" if result.val_loss is None else f"{result.val_loss:.4f}"
+    print(
+        f"trained {result.steps} steps ({result.resumed_from} before this run) in "
+        f"{result.minutes:.1f} min: loss {result.final_loss:.4f}, val loss {val}\n"
+        f"weights: {result.weights}\ncurve: {result.curve}"
+    )
+    return 0
