@@ -29,6 +29,7 @@ import torch
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 from torch import nn
+from torch.nn import functional as F
 
 from learned.pointnet import Grouping, LevelConfig, PointNet2Encoder, grouping
 from learned.weights import WeightsError, load_weights, save_weights
@@ -213,31 +214,69 @@ def timestep_embedding(t: torch.Tensor, dim: int) -> torch.Tensor:
 
 
 class Block(nn.Module):
-    """Pre-norm: self-attention among the grasp tokens, cross-attention to the condition, MLP."""
+    """Pre-norm: self-attention among the grasp tokens, cross-attention to the condition, MLP.
+
+    The condition's keys and values are projected once per condition (`memory`) and reused
+    at every denoising step: at sampling that is most of the work saved."""
 
     def __init__(self, d: int, heads: int, ff: int):
         super().__init__()
+        self.heads = heads
         self.n1, self.n2, self.n3 = nn.LayerNorm(d), nn.LayerNorm(d), nn.LayerNorm(d)
         self.self_attn = nn.MultiheadAttention(d, heads, batch_first=True)
         self.cross = nn.MultiheadAttention(d, heads, batch_first=True)
         self.ff = nn.Sequential(nn.Linear(d, ff), nn.GELU(), nn.Linear(ff, d))
 
-    def forward(self, x: torch.Tensor, cond: torch.Tensor) -> torch.Tensor:
+    def _split(self, t: torch.Tensor) -> torch.Tensor:
+        b, m, d = t.shape
+        return t.view(b, m, self.heads, d // self.heads).transpose(1, 2)
+
+    def memory(self, cond: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Keys and values (B, heads, M, d / heads) of the condition tokens."""
+        d = cond.shape[-1]
+        w, b = self.cross.in_proj_weight, self.cross.in_proj_bias
+        k = F.linear(cond, w[d : 2 * d], b[d : 2 * d])
+        v = F.linear(cond, w[2 * d :], b[2 * d :])
+        return self._split(k), self._split(v)
+
+    def forward(self, x: torch.Tensor, memory: tuple[torch.Tensor, torch.Tensor]) -> torch.Tensor:
         h = self.n1(x)
         x = x + self.self_attn(h, h, h, need_weights=False)[0]
-        x = x + self.cross(self.n2(x), cond, cond, need_weights=False)[0]
+        d = x.shape[-1]
+        w, b = self.cross.in_proj_weight, self.cross.in_proj_bias
+        q = self._split(F.linear(self.n2(x), w[:d], b[:d]))
+        att = F.scaled_dot_product_attention(q, *memory)
+        att = att.transpose(1, 2).reshape(x.shape)
+        x = x + self.cross.out_proj(att)
         return x + self.ff(self.n3(x))
 
 
 @dataclass
 class Condition:
-    """Encoded condition per batch row: tokens (B, M, d) and a global vector (B, d)."""
+    """Encoded condition per batch row: tokens (B, M, d), a global vector (B, d) and, once
+    computed, each block's keys and values of the tokens."""
 
     tokens: torch.Tensor
     glob: torch.Tensor
+    memory: list[tuple[torch.Tensor, torch.Tensor]] | None = None
 
     def repeat(self, n: int) -> Condition:
-        return Condition(self.tokens.repeat_interleave(n, 0), self.glob.repeat_interleave(n, 0))
+        mem = None
+        if self.memory is not None:
+            mem = [(k.repeat_interleave(n, 0), v.repeat_interleave(n, 0)) for k, v in self.memory]
+        return Condition(
+            self.tokens.repeat_interleave(n, 0), self.glob.repeat_interleave(n, 0), mem
+        )
+
+    @staticmethod
+    def cat(a: Condition, b: Condition) -> Condition:
+        mem = None
+        if a.memory is not None and b.memory is not None:
+            mem = [
+                (torch.cat([ka, kb]), torch.cat([va, vb]))
+                for (ka, va), (kb, vb) in zip(a.memory, b.memory, strict=True)
+            ]
+        return Condition(torch.cat([a.tokens, b.tokens]), torch.cat([a.glob, b.glob]), mem)
 
 
 class InteractionNet(nn.Module):
@@ -294,6 +333,9 @@ class InteractionNet(nn.Module):
         )
         return Condition(tokens, self.glob(torch.cat([og, hg, tt], dim=-1)))
 
+    def memory(self, cond: Condition) -> list[tuple[torch.Tensor, torch.Tensor]]:
+        return [block.memory(cond.tokens) for block in self.blocks]
+
     def forward(self, x: torch.Tensor, t: torch.Tensor, cond: Condition) -> torch.Tensor:
         """Predicted noise (B, 21) for normalised noisy x (B, 21) at integer steps t (B,)."""
         emb = self.time(timestep_embedding(t, self.config.width)) + cond.glob
@@ -301,8 +343,9 @@ class InteractionNet(nn.Module):
             [self.wrist_in(x[:, None, :9]), self.anchor_in(x[:, 9:].reshape(-1, 4, 3))], dim=1
         )
         h = tokens + self.slot[None] + emb[:, None]
-        for block in self.blocks:
-            h = block(h, cond.tokens)
+        memory = cond.memory or self.memory(cond)
+        for block, mem in zip(self.blocks, memory, strict=True):
+            h = block(h, mem)
         h = self.out_norm(h)
         return torch.cat([self.wrist_out(h[:, 0]), self.anchor_out(h[:, 1:]).flatten(1)], dim=1)
 
@@ -330,17 +373,21 @@ class InteractionNet(nn.Module):
         generator: torch.Generator | None = None,
     ) -> torch.Tensor:
         """n normalised samples per condition row (deterministic DDIM, eta = 0): (B * n, 21)."""
+        cond.memory = self.memory(cond)
         c = cond.repeat(n)
-        u = uncond.repeat(n) if uncond is not None else None
-        rows = c.tokens.shape[0]
+        u = None
+        if uncond is not None and guidance != 1.0:
+            uncond.memory = self.memory(uncond)
+            c = Condition.cat(c, uncond.repeat(n))
+            u = True
+        rows = cond.tokens.shape[0] * n
         x = torch.randn((rows, X_DIM), generator=generator)
         T = self.config.diffusion_steps
         ts = torch.linspace(T - 1, 0, steps).round().long().tolist()
         for i, t in enumerate(ts):
             tt = torch.full((rows,), t, dtype=torch.long)
-            if u is not None and guidance != 1.0:
-                both = Condition(torch.cat([c.tokens, u.tokens]), torch.cat([c.glob, u.glob]))
-                e_c, e_u = self(torch.cat([x, x]), torch.cat([tt, tt]), both).chunk(2)
+            if u is not None:
+                e_c, e_u = self(torch.cat([x, x]), torch.cat([tt, tt]), c).chunk(2)
                 eps = e_u + guidance * (e_c - e_u)
             else:
                 eps = self(x, tt, c)

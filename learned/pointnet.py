@@ -17,8 +17,6 @@ import torch
 from scipy.spatial import cKDTree
 from torch import nn
 
-from models.objects.surface import farthest_point_indices
-
 
 @dataclass(frozen=True)
 class LevelConfig:
@@ -41,6 +39,32 @@ class Grouping:
 
     def tensors(self) -> dict[str, torch.Tensor]:
         return {k: torch.from_numpy(np.ascontiguousarray(v)) for k, v in self.__dict__.items()}
+
+
+def farthest_point_indices(points: np.ndarray, n: int) -> np.ndarray:
+    """n farthest-point samples starting from the point farthest from the centroid: distances
+    only, so the choice ignores the cloud's pose (squared distances, coordinates apart: fast)."""
+    pts = np.asarray(points, dtype=np.float64)
+    n = min(n, len(pts))
+    x, y, z = (np.ascontiguousarray(pts[:, i]) for i in range(3))
+    c = pts.mean(axis=0)
+    first = int(np.argmax((x - c[0]) ** 2 + (y - c[1]) ** 2 + (z - c[2]) ** 2))
+    idx = np.empty(n, dtype=np.int64)
+    idx[0] = first
+    dist = np.full(len(pts), np.inf)
+    tmp = np.empty(len(pts))
+    for i in range(n):
+        if i:
+            idx[i] = int(np.argmax(dist))
+        j = idx[i]
+        np.subtract(x, x[j], out=tmp)
+        d = tmp * tmp
+        np.subtract(y, y[j], out=tmp)
+        d += tmp * tmp
+        np.subtract(z, z[j], out=tmp)
+        d += tmp * tmp
+        np.minimum(dist, d, out=dist)
+    return idx
 
 
 def grouping(points: np.ndarray, levels: tuple[LevelConfig, LevelConfig]) -> Grouping:

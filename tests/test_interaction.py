@@ -1,0 +1,239 @@
+"""The interaction model: frames, over-fitting, checkpoints and weights, paraphrase sets, inputs."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from scipy.spatial.transform import Rotation
+
+from learned.dataset import load_split
+from learned.interaction import (
+    Condition,
+    InteractionConfig,
+    InteractionModel,
+    canonical_frame,
+    decode_x,
+    encode_x,
+    prepare_cloud,
+)
+from learned.paraphrase import (
+    EVAL_TEMPLATES,
+    TRAIN_TEMPLATES,
+    eval_paraphrases,
+    request_of,
+    train_paraphrases,
+)
+from learned.text import encode
+from learned.weights import WeightsError
+from models.errors import InstructionError, ObjectError
+from models.objects import TABLE, instructions, make_object
+
+DATA = Path(__file__).resolve().parents[1] / "data" / "grasps_v1"
+TINY = InteractionConfig(
+    points=512,
+    object_levels=((64, 8, (16, 32)), (16, 8, (32, 32))),
+    hand_levels=((32, 8, (16, 32)), (8, 8, (32, 32))),
+    width=32,
+    heads=2,
+    layers=1,
+    ff=64,
+    diffusion_steps=50,
+    sample_steps=5,
+)
+
+
+@pytest.fixture(scope="module")
+def mug() -> np.ndarray:
+    return make_object("mug", 3).points[::4].copy()
+
+
+@pytest.fixture(scope="module")
+def tiny_model() -> InteractionModel:
+    return InteractionModel.new(TINY, seed=0)
+
+
+# ---- paraphrases -------------------------------------------------------------------------------
+def test_paraphrase_sets_disjoint() -> None:
+    assert not set(TRAIN_TEMPLATES) & set(EVAL_TEMPLATES)
+    for category in TABLE:
+        for instr in instructions(category):
+            req = request_of(instr.text)
+            train = {t.lower() for t in train_paraphrases(req)}
+            held = [t.lower() for t in eval_paraphrases(req)]
+            assert len(set(held)) == len(held)
+            assert not train & set(held), instr.text
+            assert instr.text.lower() in train  # the canonical form is trained on
+
+
+# ---- frames ------------------------------------------------------------------------------------
+def test_encode_decode_round_trip(mug: np.ndarray) -> None:
+    frame = canonical_frame(mug)
+    rng = np.random.default_rng(0)
+    q = Rotation.random(5, random_state=1).as_quat(scalar_first=True)
+    q *= np.sign(q[:, :1])
+    wrists = np.concatenate([rng.normal(0, 0.1, (5, 3)), q], axis=1)
+    anchors = rng.normal(0, 0.05, (5, 4, 3))
+    w, a = decode_x(encode_x(wrists, anchors, frame), frame)
+    np.testing.assert_allclose(w, wrists, atol=1e-9)
+    np.testing.assert_allclose(a, anchors, atol=1e-12)
+
+
+@pytest.mark.parametrize("hand", ["allegro", "leap", "shadow"])
+def test_rotating_the_input_rotates_the_output(
+    hand: str, mug: np.ndarray, tiny_model: InteractionModel
+) -> None:
+    """Turned about the vertical and moved, the cloud gives the same grasps turned and moved:
+    the canonical frame takes the pose out before the network sees the cloud."""
+    rot = Rotation.from_euler("z", 2.3)
+    shift = np.array([0.4, -0.2, 0.1])
+    w0, a0 = tiny_model.sample(mug, "Use a mug by handle", hand, 4, seed=5)
+    w1, a1 = tiny_model.sample(rot.apply(mug) + shift, "Use a mug by handle", hand, 4, seed=5)
+    np.testing.assert_allclose(w1[:, :3], rot.apply(w0[:, :3]) + shift, atol=1e-6)
+    turned = rot * Rotation.from_quat(w0[:, 3:], scalar_first=True)
+    diff = turned.inv() * Rotation.from_quat(w1[:, 3:], scalar_first=True)
+    assert diff.magnitude().max() < 1e-5
+    np.testing.assert_allclose(
+        a1, rot.apply(a0.reshape(-1, 3)).reshape(a0.shape) + shift, atol=1e-6
+    )
+    # anchors are cloud points
+    assert np.isclose(np.linalg.norm(mug[None] - a0.reshape(-1, 1, 3), axis=2).min(1), 0).all()
+
+
+def test_sample_shapes_and_unit_quaternions(mug: np.ndarray, tiny_model: InteractionModel) -> None:
+    w, a = tiny_model.sample(mug, "grab the mug by its handle", "allegro", 3)
+    assert w.shape == (3, 7) and a.shape == (3, 4, 3)
+    np.testing.assert_allclose(np.linalg.norm(w[:, 3:], axis=1), 1.0, atol=1e-9)
+    assert (w[:, 3] >= 0).all()
+
+
+# ---- over-fitting ------------------------------------------------------------------------------
+@pytest.mark.skipif(not DATA.is_dir(), reason="data/grasps_v1 absent")
+def test_tiny_overfit() -> None:
+    """Four grasps of one mug learned to a small noise error in seconds; samples then land
+    near the taught grasps."""
+    torch.set_num_threads(1)
+    data = load_split(DATA, "train")
+    a, meta = data.arrays, data.meta
+    rows = list(range(4))
+    assert len({(a["category"][r], a["seed"][r]) for r in rows}) == 1
+    obj = make_object(meta["categories"][a["category"][0]], int(a["seed"][0]))
+    model = InteractionModel.new(TINY, seed=0)
+    prep = prepare_cloud(obj.points, TINY)
+    texts = [meta["instructions"][a["instruction"][r]] for r in rows]
+    hands = [meta["hands"][a["hand"][r]] for r in rows]
+    vecs = encode(texts)
+    x = torch.tensor(
+        np.stack(
+            [encode_x(a["wrist"][r][None], a["anchors"][r][None], prep.frame)[0] for r in rows]
+        )
+    ).float()
+    model.net.x_mean.copy_(x.mean(0))
+    model.net.x_std.copy_(x.std(0).clamp(min=0.05))
+    x0 = (x - model.net.x_mean) / model.net.x_std
+    opt = torch.optim.AdamW(model.net.parameters(), 3e-3)
+    gen = torch.Generator().manual_seed(0)
+    losses = []
+    for _ in range(300):
+        conds = [model.condition([prep], h, vecs[i : i + 1]) for i, h in enumerate(hands)]
+        cond = Condition(torch.cat([c.tokens for c in conds]), torch.cat([c.glob for c in conds]))
+        batch = Condition(cond.tokens.repeat(16, 1, 1), cond.glob.repeat(16, 1))
+        loss = model.net.loss(x0.repeat(16, 1), batch, gen)
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        losses.append(float(loss.detach()))
+    assert np.mean(losses[-20:]) < 0.25 * np.mean(losses[:5])
+    w, _ = model.sample(obj.points, texts[0], hands[0], 8, guidance=1.0, steps=20)
+    taught = np.stack(
+        [a["wrist"][r][:3] for r in rows if texts[r] == texts[0] and hands[r] == hands[0]]
+    )
+    near = np.linalg.norm(w[:, None, :3] - taught[None], axis=2).min(1)
+    assert np.median(near) < 0.06 and near.min() < 0.02, near
+
+
+# ---- weights and checkpoints -------------------------------------------------------------------
+def test_weights_round_trip(tmp_path: Path, mug: np.ndarray, tiny_model: InteractionModel) -> None:
+    tiny_model.save(str(tmp_path))
+    loaded = InteractionModel.load(str(tmp_path))
+    assert loaded.config == TINY
+    for k, v in tiny_model.net.state_dict().items():
+        assert torch.equal(v, loaded.net.state_dict()[k]), k
+    w0, a0 = tiny_model.sample(mug, "Hold a mug by body", "leap", 2, seed=3)
+    w1, a1 = loaded.sample(mug, "Hold a mug by body", "leap", 2, seed=3)
+    np.testing.assert_array_equal(w0, w1)
+    np.testing.assert_array_equal(a0, a1)
+
+
+def test_missing_and_corrupt_weights(tmp_path: Path, tiny_model: InteractionModel) -> None:
+    with pytest.raises(WeightsError, match=r"interaction\.safetensors.*drograsp train interaction"):
+        InteractionModel.load(str(tmp_path / "nowhere"))
+    tiny_model.save(str(tmp_path))
+    tensors = tmp_path / "interaction.safetensors"
+    tensors.write_bytes(tensors.read_bytes()[:100])
+    with pytest.raises(WeightsError, match=r"interaction\.safetensors is damaged.*drograsp train"):
+        InteractionModel.load(str(tmp_path))
+    tiny_model.save(str(tmp_path))
+    (tmp_path / "interaction.json").write_text("{not json", encoding="utf-8")
+    with pytest.raises(WeightsError, match=r"interaction\.json is damaged"):
+        InteractionModel.load(str(tmp_path))
+    tiny_model.save(str(tmp_path))
+    other = InteractionModel.new(InteractionConfig(width=64, heads=2, layers=1), seed=0)
+    cfg = json.loads((tmp_path / "interaction.json").read_text())
+    cfg["config"] = other.config.to_json()
+    (tmp_path / "interaction.json").write_text(json.dumps(cfg), encoding="utf-8")
+    with pytest.raises(WeightsError, match="does not fit the model"):
+        InteractionModel.load(str(tmp_path))
+
+
+def _mini_dataset(root: Path) -> None:
+    """Four train grasps of one object and two val grasps, in the dataset's layout."""
+    meta = json.loads((DATA / "meta.json").read_text())
+    train, val = load_split(DATA, "train"), load_split(DATA, "val")
+    block = {k: np.concatenate([train.arrays[k][:4], val.arrays[k][:2]]) for k in train.arrays}
+    (root / "blocks").mkdir(parents=True)
+    np.savez(root / "blocks" / "b0.npz", **block)
+    meta["blocks"] = {"b0": {"grasps": 6}}
+    (root / "meta.json").write_text(json.dumps(meta), encoding="utf-8")
+
+
+@pytest.mark.skipif(not DATA.is_dir(), reason="data/grasps_v1 absent")
+def test_training_checkpoint_resume(tmp_path: Path) -> None:
+    from learned.train_interaction import TrainSettings, train
+
+    data, out = tmp_path / "data", tmp_path / "run"
+    _mini_dataset(data)
+    settings = TrainSettings(
+        minutes=5, max_steps=2, batch=4, repeats=2, samples_per_object=1, progress=False
+    )
+    first = train(data, out, settings, TINY)
+    assert first.steps == 2 and first.resumed_from == 0
+    assert (out / "checkpoint.safetensors").is_file() and (out / "loss.png").is_file()
+    settings.max_steps = 4
+    second = train(data, out, settings, TINY)
+    assert second.resumed_from == 2 and second.steps == 4
+    model = InteractionModel.load(str(out))
+    assert model.info["steps"] == 4
+    w, a = model.sample(make_object("mug", 3).points, "Use a mug by handle", "shadow", 2)
+    assert np.isfinite(w).all() and np.isfinite(a).all()
+    shutil.rmtree(out / "object_points")
+
+
+# ---- bad input ---------------------------------------------------------------------------------
+def test_bad_inputs(mug: np.ndarray, tiny_model: InteractionModel) -> None:
+    with pytest.raises(ObjectError, match="empty"):
+        tiny_model.sample(np.zeros((0, 3)), "Use a mug by handle", "shadow", 2)
+    bad = mug.copy()
+    bad[5, 1] = np.nan
+    with pytest.raises(ObjectError, match="NaN"):
+        tiny_model.sample(bad, "Use a mug by handle", "shadow", 2)
+    with pytest.raises(ObjectError, match="millimetres"):
+        tiny_model.sample(mug * 1000, "Use a mug by handle", "shadow", 2)
+    with pytest.raises(InstructionError):
+        tiny_model.sample(mug, "   ", "shadow", 2)
+    with pytest.raises(ValueError, match="positive integer"):
+        tiny_model.sample(mug, "Use a mug by handle", "shadow", 0)
