@@ -15,6 +15,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from models.errors import ObjectError
 
@@ -38,14 +39,13 @@ def contact_map(points: np.ndarray, anchors: np.ndarray) -> np.ndarray:
 def farthest_from(points: np.ndarray, seeds: np.ndarray, n: int) -> np.ndarray:
     """Indices of n more points by farthest point sampling, starting from the chosen `seeds`
     (indices) so that the new points fill in where the seeds are not."""
-    dist = np.full(len(points), np.inf)
-    for chunk in np.array_split(seeds, max(1, len(seeds) // 64)):
-        d = np.linalg.norm(points[:, None] - points[chunk][None], axis=2).min(axis=1)
-        dist = np.minimum(dist, d)
+    pts = np.ascontiguousarray(points, dtype=np.float64)
+    dist = cKDTree(pts[np.asarray(seeds)]).query(pts)[0] ** 2  # squared, to the nearest seed
     chosen = np.empty(n, dtype=np.int64)
+    x, y, z = (np.ascontiguousarray(pts[:, c]) for c in range(3))  # 5x faster than (N, 3) rows
     for i in range(n):
-        chosen[i] = int(np.argmax(dist))
-        dist = np.minimum(dist, np.linalg.norm(points - points[chosen[i]], axis=1))
+        j = chosen[i] = int(np.argmax(dist))
+        np.minimum(dist, (x - x[j]) ** 2 + (y - y[j]) ** 2 + (z - z[j]) ** 2, out=dist)
     return chosen
 
 

@@ -19,12 +19,15 @@ Weights are stored as safetensors with the config in the file's metadata.
 from __future__ import annotations
 
 import json
+import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+import numpy as np
 import torch
 from torch import nn
 
+from learned.multilateration import RigidGroups, multilaterate, rigid_fit
 from models.errors import DrograspError
 
 TEXT_DIM = 384  # learned.text.EMBED_DIM; fixed here so the network imports no text model
@@ -249,3 +252,100 @@ def load_weights(path: str | Path | None = None) -> Checkpoint:
         ) from None
     net.eval()
     return Checkpoint(net, meta)
+
+
+# ---- from D to hand point targets ----------------------------------------------------------
+def input_hand_points(
+    hand, wrist: np.ndarray, rng: np.random.Generator | None = None, joint_noise: float = 0.0
+) -> np.ndarray:
+    """(B, 512, 3) the hand's surface points at `wrist` (B, 7) with the fingers at the open
+    pose (plus Gaussian joint noise within the limits, for training): the hand input."""
+    wrist = np.asarray(wrist, dtype=np.float64).reshape(-1, 7)
+    q = np.repeat(hand.open_pose[None], len(wrist), axis=0).astype(np.float64)
+    if rng is not None and joint_noise > 0:
+        q = np.clip(q + rng.normal(scale=joint_noise, size=q.shape), hand.lower, hand.upper)
+    return hand.surface_points(wrist, q).numpy().astype(np.float32)
+
+
+_GROUPS: dict[str, RigidGroups] = {}
+
+
+def rigid_groups(name: str) -> RigidGroups:
+    """The named hand's rigid bodies (cached per hand)."""
+    if name not in _GROUPS:
+        from models.hands import load_hand
+
+        _GROUPS[name] = RigidGroups.of_hand(load_hand(name))
+    return _GROUPS[name]
+
+
+def closeness(d_min: torch.Tensor) -> torch.Tensor:
+    """Confidence of a multilaterated point from its smallest predicted distance (m): 1 at
+    contact, e^-1 at 1 cm. A far point's neighbours are all predicted about equally far (the
+    loss clips distances), so its position is guesswork and should weigh little."""
+    return torch.exp(-d_min / 0.01)
+
+
+def place_hand(
+    names: list[str],
+    obj_xyz: torch.Tensor,
+    d: torch.Tensor,
+    index: np.ndarray,
+    neighbours: int = 128,
+    prior: torch.Tensor | None = None,
+    prior_weight: float = 0.01,
+    far: float = 0.05,
+) -> torch.Tensor:
+    """(B, 512, 3) every hand point from the predicted rows d (B, P, M) of the hand points
+    `index` (names: each row's hand): multilateration (regularised toward `prior` (B, P, 3),
+    the points' input positions, where given), then per-body Kabsch weighted by closeness.
+    Bodies with no estimated point are NaN."""
+    est = multilaterate(obj_xyz, d, neighbours, prior, prior_weight, far)
+    weight = closeness(d.min(dim=-1).values) + 1e-6
+    out = torch.empty(len(names), 512, 3, dtype=est.dtype)
+    for name in sorted(set(names)):
+        sel = np.flatnonzero(np.array(names) == name)
+        out[sel] = rigid_fit(rigid_groups(name), est[sel], index, weight[sel])
+    return out
+
+
+@dataclass
+class Prediction:
+    """D(R,O) for one grasp and the hand point targets it implies."""
+
+    distances: np.ndarray  # (512, 512) m, hand point x object input point
+    targets: np.ndarray  # (512, 3) every hand point after multilateration + Kabsch
+    closeness: np.ndarray  # (512,) confidence of each target (see `closeness`)
+    forward_time: float  # s, network forward only
+    total_time: float  # s, hand input + forward + multilateration + Kabsch
+
+
+@torch.no_grad()
+def predict(
+    net: DRONet,
+    hand,
+    wrist: np.ndarray,
+    obj_features: np.ndarray,
+    text_embedding: np.ndarray,
+    neighbours: int = 128,
+) -> Prediction:
+    """The distance matrix and hand point targets for `hand` (models.hands.HandModel) at the
+    first stage's `wrist` (7,), the object input (512, 4) (learned.contact_map.object_input)
+    and the instruction's embedding (384,) (learned.text.encode)."""
+    start = time.perf_counter()
+    hand_in = torch.from_numpy(input_hand_points(hand, wrist))
+    obj = torch.as_tensor(np.asarray(obj_features, dtype=np.float32))[None]
+    text = torch.as_tensor(np.asarray(text_embedding, dtype=np.float32)).reshape(1, -1)
+    t0 = time.perf_counter()
+    d = net(hand_in, obj, text)
+    forward = time.perf_counter() - t0
+    placed = place_hand(
+        [hand.name], obj[..., :3].double(), d.double(), np.arange(512), neighbours, hand_in.double()
+    )
+    return Prediction(
+        distances=d[0].numpy(),
+        targets=placed[0].numpy(),
+        closeness=closeness(d[0].min(dim=-1).values).double().numpy(),
+        forward_time=forward,
+        total_time=time.perf_counter() - start,
+    )

@@ -138,7 +138,11 @@ class GraspTargets:
     row of NaN leaves that finger free (a pinch's fourth finger);
     anchor_normals: (4, 3) outward normals there, so the fingertip sphere rests on the point;
     point_targets: (P, 3) world targets for hand surface points `point_index` (indices into
-    the 512 fixed points), e.g. from multilateration of a predicted D(R,O)."""
+    the 512 fixed points), e.g. from multilateration of a predicted D(R,O);
+    point_weights: (P,) relative weights of those targets (x settings.point_weight), the
+    distance-matching cost of D(R,O): its predicted closeness, so the points it says touch
+    the object pull hardest and far points (guessed positions) barely at all. Absent: every
+    target weighs 1."""
 
     wrist: np.ndarray
     q: np.ndarray
@@ -146,6 +150,7 @@ class GraspTargets:
     anchor_normals: np.ndarray | None = None
     point_index: np.ndarray | None = None
     point_targets: np.ndarray | None = None
+    point_weights: np.ndarray | None = None
     palm_target: np.ndarray | None = None  # where the palm centre should rest (enclosing grasps)
     fix_wrist: bool = False
 
@@ -380,14 +385,25 @@ class GraspProgram:
                 s.palm_weight * np.eye(3),
             )
         if targets.point_targets is not None:
-            for i, target in zip(targets.point_index, rounded(targets.point_targets), strict=True):
-                ik.AddPositionCost(
-                    world,
-                    target,
-                    self.point_frames[i],
-                    self.point_local[i],
-                    s.point_weight * np.eye(3),
-                )
+            weights = np.ones(len(targets.point_index))
+            if targets.point_weights is not None:
+                weights = rounded(np.asarray(targets.point_weights, dtype=float))
+                if weights.shape != (len(targets.point_index),) or not np.all(weights >= 0):
+                    raise PlanningError(
+                        f"point_weights of shape {weights.shape} (or negative): expected "
+                        f"{len(targets.point_index)} weights >= 0, one per point target"
+                    )
+            for i, target, w in zip(
+                targets.point_index, rounded(targets.point_targets), weights, strict=True
+            ):
+                if w > 0:
+                    ik.AddPositionCost(
+                        world,
+                        target,
+                        self.point_frames[i],
+                        self.point_local[i],
+                        s.point_weight * w * np.eye(3),
+                    )
         start_wrist = self.handle.root_body.floating_positions_start()
         wrist_vars = qvar[start_wrist : start_wrist + 7]
         if targets.fix_wrist:

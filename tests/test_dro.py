@@ -1,0 +1,198 @@
+"""The D(R,O) network: shapes, weights files, a tiny over-fit, resumable training, and the grasp
+program's distance-matching cost."""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+import trimesh
+
+from learned import train_dro
+from learned.dro import (
+    DROConfig,
+    DRONet,
+    DROWeightsError,
+    input_hand_points,
+    load_weights,
+    place_hand,
+    predict,
+    save_weights,
+)
+from models.hands import available_hands, load_hand
+from planner.grasp_program import GraspTargets, grasp_program
+
+DATA = Path(__file__).resolve().parents[1] / "data" / "grasps_v1"
+TINY = DROConfig(edge_widths=(16, 16), feature_dim=32, kernel_hidden=16, k=8)
+
+
+def _inputs(b: int = 2, n: int = 64, m: int = 96) -> tuple[torch.Tensor, ...]:
+    g = torch.Generator().manual_seed(0)
+    hand = torch.rand(b, n, 3, generator=g) * 0.1
+    obj = torch.cat([torch.rand(b, m, 3, generator=g) * 0.1, torch.rand(b, m, 1, generator=g)], -1)
+    return hand, obj, torch.nn.functional.normalize(torch.randn(b, 384, generator=g), dim=-1)
+
+
+def test_network_shapes_and_positive_distances():
+    torch.manual_seed(0)
+    net = DRONet(TINY)
+    hand, obj, text = _inputs()
+    d = net(hand, obj, text)
+    assert d.shape == (2, 64, 96) and bool((d > 0).all())
+    sub = net(hand, obj, text, hand_index=torch.tensor([[0, 5], [1, 2]]))
+    assert torch.allclose(sub[0], d[0, [0, 5]], atol=1e-6)
+
+
+def test_weights_round_trip(tmp_path):
+    torch.manual_seed(1)
+    net = DRONet(TINY).eval()
+    path = tmp_path / "w.safetensors"
+    save_weights(net, path, {"steps": 3})
+    back = load_weights(path)
+    assert back.net.cfg == TINY and back.meta == {"steps": 3}
+    hand, obj, text = _inputs()
+    with torch.no_grad():
+        assert torch.equal(net(hand, obj, text), back.net(hand, obj, text))
+
+
+def test_missing_or_damaged_weights_name_the_file_and_the_fix(tmp_path):
+    missing = tmp_path / "none.safetensors"
+    with pytest.raises(DROWeightsError, match="none.safetensors.*drograsp train dro"):
+        load_weights(missing)
+    damaged = tmp_path / "bad.safetensors"
+    damaged.write_bytes(b"\x08\x00\x00\x00\x00\x00\x00\x00{garbage")
+    with pytest.raises(DROWeightsError, match="bad.safetensors.*damaged"):
+        load_weights(damaged)
+    other = tmp_path / "other.safetensors"
+    save_weights(DRONet(TINY), other)
+    from safetensors.torch import load_file, save_file
+
+    tensors = load_file(str(other))
+    tensors.pop(next(iter(tensors)))
+    save_file(tensors, str(other), metadata={"config": TINY.to_json()})
+    with pytest.raises(DROWeightsError, match="other.safetensors"):
+        load_weights(other)
+
+
+def _fake_embed(texts: list[str]) -> np.ndarray:
+    """A fixed unit vector per text (the sentence encoder takes 10 s to load)."""
+    out = []
+    for t in texts:
+        seed = int(hashlib.sha256(t.encode()).hexdigest()[:8], 16)
+        v = np.random.default_rng(seed).normal(size=384)
+        out.append(v / np.linalg.norm(v))
+    return np.asarray(out, np.float32)
+
+
+needs_data = pytest.mark.skipif(not (DATA / "meta.json").is_file(), reason="no dataset v1")
+
+
+@needs_data
+def test_tiny_overfit_reaches_low_distance_error(monkeypatch):
+    """Two grasps, a small network, 120 steps: D error on near pairs under 8 mm (from ~20)."""
+    monkeypatch.setattr(train_dro, "embed", _fake_embed)
+    torch.manual_seed(0)
+    cfg = train_dro.TrainConfig(str(DATA), "", batch=2, hand_points=64, lr=3e-3, net=TINY)
+    data = train_dro.prepare(DATA, "test", max_rows=2, progress=False)
+    net = DRONet(TINY)
+    opt = torch.optim.Adam(net.parameters(), lr=cfg.lr)
+    rows = np.arange(2)
+    before = train_dro.d_error(net.eval(), data, rows, cfg)
+    net.train()
+    for step in range(120):
+        rng = np.random.default_rng(step)
+        index = np.sort(rng.choice(512, cfg.hand_points, replace=False))
+        batch = train_dro.make_batch(data, rows, replace(cfg, joint_noise=0.0), None)
+        loss = train_dro.losses(net, batch, cfg, index)["loss"]
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+    after = train_dro.d_error(net.eval(), data, rows, cfg)
+    assert after < 0.008 and after < 0.5 * before, (before, after)
+
+
+@needs_data
+def test_training_writes_and_resumes(tmp_path, monkeypatch):
+    monkeypatch.setattr(train_dro, "embed", _fake_embed)
+    cfg = train_dro.TrainConfig(
+        str(DATA), str(tmp_path), epochs=1, batch=2, max_rows=4, val_rows=2, net=TINY
+    )
+    weights = train_dro.train(cfg, progress=False)
+    for name in ("checkpoint.pt", "loss.png", "dro.safetensors", "cache_train.npz"):
+        assert (tmp_path / name).is_file()
+    first = load_weights(weights)
+    assert first.meta["steps"] == 2
+    train_dro.train(cfg, progress=False)  # resumes at the end: nothing more to do
+    again = load_weights(weights)
+    for key, value in first.net.state_dict().items():
+        assert torch.equal(value, again.net.state_dict()[key])
+    with pytest.raises(train_dro.TrainingError, match="other settings"):
+        train_dro.train(replace(cfg, lr=0.5), progress=False)
+
+
+@pytest.mark.parametrize("hand_name", available_hands())
+def test_predict_gives_a_target_for_every_hand_point(hand_name):
+    hand = load_hand(hand_name)
+    torch.manual_seed(0)
+    net = DRONet(TINY).eval()
+    rng = np.random.default_rng(0)
+    obj = np.c_[rng.uniform(-0.05, 0.05, (512, 3)), rng.uniform(0, 1, 512)]
+    wrist = np.array([0, 0, 0.15, 1, 0, 0, 0.0])
+    pred = predict(net, hand, wrist, obj, _fake_embed(["Use a mug by handle"])[0])
+    assert pred.distances.shape == (512, 512) and pred.targets.shape == (512, 3)
+    assert np.isfinite(pred.targets).all() and ((pred.closeness > 0) & (pred.closeness <= 1)).all()
+
+
+@pytest.mark.parametrize("hand_name", available_hands())
+def test_exact_distances_place_the_grasp_and_drake_follows(hand_name):
+    """True D(R,O) of a grasp -> multilateration + Kabsch put every hand point back; the grasp
+    program's distance-matching cost (point targets weighted by closeness) then moves the
+    hand's points from the open pose to those targets."""
+    hand = load_hand(hand_name)
+    wrist = np.array([0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0])
+    q_goal = 0.5 * hand.open_pose + 0.5 * (0.3 * hand.lower + 0.7 * hand.upper)
+    q_goal = hand.couple(q_goal)
+    truth = hand.surface_points(wrist, q_goal).double()
+    # an "object" of points around the hand, 5-15 mm from its surface
+    rng = np.random.default_rng(0)
+    offsets = torch.tensor(rng.normal(size=(512, 3)))
+    offsets = (
+        offsets
+        / offsets.norm(dim=1, keepdim=True)
+        * torch.tensor(rng.uniform(0.005, 0.015, (512, 1)))
+    )
+    obj = (truth[0] + offsets)[None]
+    placed = place_hand([hand.name], obj, torch.cdist(truth, obj), np.arange(512))
+    assert float((placed - truth).norm(dim=-1).max()) < 1e-3
+    weights = np.exp(-torch.cdist(truth, obj)[0].min(dim=1).values.numpy() / 0.01)
+    # the program's object is a small box far from the hand: the cost alone moves the points
+    box = trimesh.creation.box(extents=[0.02, 0.02, 0.02])
+    program = grasp_program(hand, [box.vertices + [0.0, 0.0, -1.0]])
+    index = np.arange(0, 512, 4)
+    result = program.solve(
+        GraspTargets(
+            wrist,
+            hand.open_pose,
+            point_index=index,
+            point_targets=placed[0, index].numpy(),
+            point_weights=weights[index],
+            fix_wrist=True,
+        )
+    )
+    start = hand.surface_points(wrist, hand.open_pose)[0].double()
+    end = hand.surface_points(result.wrist, result.q)[0].double()
+    before = float((start[index] - truth[0, index]).norm(dim=1).mean())
+    after = float((end[index] - truth[0, index]).norm(dim=1).mean())
+    assert after < 0.25 * before and after < 0.005, (before, after)
+
+
+def test_input_hand_points_use_the_open_pose():
+    hand = load_hand(available_hands()[0])
+    wrist = np.array([[0.1, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0]])
+    pts = input_hand_points(hand, wrist)
+    ref = hand.surface_points(wrist, hand.open_pose).numpy()
+    assert np.allclose(pts, ref, atol=1e-6)
