@@ -29,6 +29,7 @@ import argparse
 import hashlib
 import json
 import math
+import shutil
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -38,7 +39,15 @@ import torch
 
 from learned.contact_map import object_input
 from learned.dataset import DatasetError, load_split
-from learned.dro import DROConfig, DRONet, input_hand_points, place_hand, save_weights
+from learned.dro import (
+    WEIGHTS,
+    DROConfig,
+    DRONet,
+    input_hand_points,
+    load_weights,
+    place_hand,
+    save_weights,
+)
 from models.errors import DrograspError
 
 
@@ -458,45 +467,55 @@ def train(cfg: TrainConfig, progress: bool = True) -> Path:
     return weights
 
 
+OPTIONS = (
+    ("epochs", int, "passes over the train rows"),
+    ("minutes", float, "stop (and save) after this much training time"),
+    ("batch", int, "grasps per step"),
+    ("lr", float, "peak learning rate (one-cycle schedule)"),
+    ("hand_points", int, "hand points per step whose rows of D enter the losses"),
+    ("pose_weight", float, "weight of the pose loss through multilateration + Kabsch"),
+    ("seed", int, "seed of everything random"),
+    ("threads", int, "torch threads"),
+    ("checkpoint_every", int, "steps between checkpoints (and validation)"),
+    ("max_rows", int, "only the first rows of each split (quick runs)"),
+)
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """The training options (shared by `drograsp train dro` and `python -m`)."""
-    d = TrainConfig("", "")
+    """The training options; every default (None) is TrainConfig's. Imports nothing heavy, so
+    the CLI can copy this list without importing torch (see OPTIONS)."""
     parser.add_argument("--data", required=True, help="dataset folder (drograsp dataset ...)")
     parser.add_argument("--out", required=True, help="run folder: checkpoint, weights, plot")
-    parser.add_argument("--epochs", type=int, default=d.epochs)
-    parser.add_argument("--minutes", type=float, default=None, help="stop after this long")
-    parser.add_argument("--batch", type=int, default=d.batch)
-    parser.add_argument("--lr", type=float, default=d.lr)
-    parser.add_argument("--hand-points", type=int, default=d.hand_points)
-    parser.add_argument("--pose-weight", type=float, default=d.pose_weight)
+    for name, kind, text in OPTIONS:
+        parser.add_argument("--" + name.replace("_", "-"), type=kind, default=None, help=text)
     parser.add_argument("--hands", nargs="+", default=None, help="train on these hands only")
-    parser.add_argument("--seed", type=int, default=d.seed)
-    parser.add_argument("--threads", type=int, default=d.threads)
-    parser.add_argument("--checkpoint-every", type=int, default=d.checkpoint_every)
-    parser.add_argument("--max-rows", type=int, default=None, help="first rows of each split")
-
-
-def config_from_args(args: argparse.Namespace) -> TrainConfig:
-    return TrainConfig(
-        data=args.data,
-        out=args.out,
-        epochs=args.epochs,
-        minutes=args.minutes,
-        batch=args.batch,
-        lr=args.lr,
-        hand_points=args.hand_points,
-        pose_weight=args.pose_weight,
-        hands=tuple(args.hands) if args.hands else None,
-        seed=args.seed,
-        threads=args.threads,
-        checkpoint_every=args.checkpoint_every,
-        max_rows=args.max_rows,
+    parser.add_argument(
+        "--install", action="store_true", help=f"copy the final weights to {WEIGHTS}"
     )
 
 
+def config_from_args(args: argparse.Namespace) -> TrainConfig:
+    """A TrainConfig from parsed options; options left out keep TrainConfig's defaults."""
+    given = {name: getattr(args, name, None) for name, _, _ in OPTIONS}
+    cfg = TrainConfig(args.data, args.out, **{k: v for k, v in given.items() if v is not None})
+    if getattr(args, "hands", None):
+        cfg.hands = tuple(args.hands)
+    return cfg
+
+
 def run(args: argparse.Namespace) -> int:
+    """Train (or resume), print the outcome; with --install copy the weights into the package."""
     weights = train(config_from_args(args))
-    print(f"weights: {weights}")
+    meta = load_weights(weights).meta
+    print(
+        f"trained {meta['steps']} steps ({meta['epochs']:.2f} epochs, {meta['train_seconds']} s):"
+        f" validation D error {meta['val_d_error_m'] * 1000:.1f} mm on pairs under 5 cm\n"
+        f"weights: {weights}\ncurve: {Path(args.out) / 'loss.png'}"
+    )
+    if getattr(args, "install", False):
+        WEIGHTS.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(weights, WEIGHTS)
+        print(f"installed: {WEIGHTS}")
     return 0
 
 

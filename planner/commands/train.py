@@ -45,6 +45,22 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="copy the final weights to learned/weights/ (the shipped model)",
     )
     i.set_defaults(func=run_interaction)
+    d = tsub.add_parser(
+        "dro",
+        help="wrist + anchors + instruction + hand cloud -> hand-object distances (D(R,O))",
+        description="Train the D(R,O) network (learned.train_dro): writes OUT/dro.safetensors, "
+        "OUT/loss.png and OUT/checkpoint.pt; --install copies the weights to learned/weights/.",
+    )
+    d.add_argument("--data", required=True, metavar="DIR", help="dataset folder")
+    d.add_argument("--out", required=True, metavar="DIR", help="run folder (checkpoints, curve)")
+    d.add_argument("--minutes", type=positive_float, default=None, help="training time budget")
+    d.add_argument("--epochs", type=positive_int, default=None, help="default 20")
+    d.add_argument("--batch", type=positive_int, default=None, help="grasps per step (default 8)")
+    d.add_argument("--seed", type=non_negative_int, default=None)
+    d.add_argument("--threads", type=positive_int, default=None, help="torch threads (default 1)")
+    d.add_argument("--hands", nargs="+", default=None, help="train on these hands' rows only")
+    d.add_argument("--install", action="store_true", help="copy the weights to learned/weights/")
+    d.set_defaults(func=run_dro)
 
 
 def run_interaction(args: argparse.Namespace) -> int:
@@ -72,3 +88,9 @@ def run_interaction(args: argparse.Namespace) -> int:
         f"weights: {result.weights}\ncurve: {result.curve}"
     )
     return 0
+
+
+def run_dro(args: argparse.Namespace) -> int:
+    from learned.train_dro import run
+
+    return run(args)
