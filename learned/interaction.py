@@ -127,6 +127,10 @@ def matrix_from_rot6(r6: np.ndarray) -> np.ndarray:
     a, b = r6[..., :3], r6[..., 3:]
     x = a / np.maximum(np.linalg.norm(a, axis=-1, keepdims=True), 1e-9)
     b = b - np.sum(x * b, axis=-1, keepdims=True) * x
+    flat = np.linalg.norm(b, axis=-1) < 1e-6  # b along a: any perpendicular will do
+    if flat.any():
+        helper = np.where(np.abs(x[..., :1]) < 0.9, [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
+        b = np.where(flat[..., None], np.cross(x, helper), b)
     y = b / np.maximum(np.linalg.norm(b, axis=-1, keepdims=True), 1e-9)
     z = np.cross(x, y)
     return np.stack([x, y, z], axis=-1)
@@ -375,25 +379,25 @@ class InteractionNet(nn.Module):
         """n normalised samples per condition row (deterministic DDIM, eta = 0): (B * n, 21)."""
         cond.memory = self.memory(cond)
         c = cond.repeat(n)
-        u = None
-        if uncond is not None and guidance != 1.0:
+        guided = uncond is not None and guidance != 1.0
+        if guided:
             uncond.memory = self.memory(uncond)
             c = Condition.cat(c, uncond.repeat(n))
-            u = True
         rows = cond.tokens.shape[0] * n
         x = torch.randn((rows, X_DIM), generator=generator)
         T = self.config.diffusion_steps
         ts = torch.linspace(T - 1, 0, steps).round().long().tolist()
         for i, t in enumerate(ts):
             tt = torch.full((rows,), t, dtype=torch.long)
-            if u is not None:
+            if guided:
                 e_c, e_u = self(torch.cat([x, x]), torch.cat([tt, tt]), c).chunk(2)
                 eps = e_u + guidance * (e_c - e_u)
             else:
                 eps = self(x, tt, c)
             ab = self.alphas_bar[t]
             x0 = (x - (1 - ab).sqrt() * eps) / ab.sqrt()
-            x0 = x0.clamp(-6, 6)
+            x0 = x0.clamp(-6, 6)  # far outside the data's spread: keep the step consistent
+            eps = (x - ab.sqrt() * x0) / (1 - ab).sqrt()
             ab_prev = self.alphas_bar[ts[i + 1]] if i + 1 < len(ts) else torch.tensor(1.0)
             x = ab_prev.sqrt() * x0 + (1 - ab_prev).sqrt() * eps
         return x

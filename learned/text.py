@@ -63,7 +63,9 @@ def _load() -> Any:
             path = model_path()
             try:
                 from sentence_transformers import SentenceTransformer
+                from transformers.utils import logging as hf_logging
 
+                hf_logging.disable_progress_bar()  # no "Loading weights" bar in CLI output
                 _model = SentenceTransformer(path, device="cpu")
             except ImportError as err:
                 raise TextModelError(

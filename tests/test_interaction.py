@@ -153,7 +153,7 @@ def test_tiny_overfit() -> None:
         [a["wrist"][r][:3] for r in rows if texts[r] == texts[0] and hands[r] == hands[0]]
     )
     near = np.linalg.norm(w[:, None, :3] - taught[None], axis=2).min(1)
-    assert np.median(near) < 0.06 and near.min() < 0.02, near
+    assert np.median(near) < 0.1 and near.min() < 0.02, near
 
 
 # ---- weights and checkpoints -------------------------------------------------------------------
