@@ -18,6 +18,7 @@ from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 
+import numpy as np
 from tqdm import tqdm
 
 from models.hands import available_hands
@@ -44,6 +45,10 @@ class PairRecord:
     # every candidate's CandidateResult.summary(): features (quality, task quality, anchor
     # error, pregrasp penetration) and outcome, for fitting a validation order offline
     candidate_summaries: list[dict] = field(default_factory=list)
+    # the returned grasp meets its intent's definition (planner.intent; None: no grasp or not
+    # checked) and its wrist [x, y, z, qw, qx, qy, qz], for distinct grasps across intents
+    intent_ok: bool | None = None
+    wrist: list[float] | None = None
 
 
 def write_records(records: Sequence[PairRecord], path: Path) -> None:
@@ -118,6 +123,12 @@ def run_pair(args: tuple[str, str, int, str, int, tuple[str, ...]]) -> PairRecor
         solve_times=[c.solve.solve_time for c in result.candidates],
         plan_time=elapsed,
         candidate_summaries=[c.summary() for c in result.candidates],
+        intent_ok=result.intent_ok,
+        wrist=(
+            None
+            if result.grasp is None
+            else [*map(float, result.grasp.wrist_pos), *map(float, result.grasp.wrist_quat)]
+        ),
     )
 
 
@@ -146,15 +157,69 @@ def summarize(records: list[PairRecord]) -> list[dict]:
                     statistics.mean(r.candidates for r in held) if held else float("nan")
                 ),
                 "errors": sum(bool(r.error) for r in rs),
+                # of the returned grasps held on the instructed part: meeting their intent
+                "intent_ok": _share([r.intent_ok for r in rs if r.part_ok]),
             }
         )
     return rows
 
 
+def _share(flags: Sequence[bool | None]) -> float:
+    known = [f for f in flags if f is not None]
+    return sum(known) / len(known) if known else float("nan")
+
+
+def intent_rows(records: list[PairRecord]) -> list[dict]:
+    """Per hand and intent: pairs, held on the part, and the share of those meeting the
+    intent's definition."""
+    rows = []
+    for hand in sorted({r.hand for r in records}):
+        for intent in ("Use", "Hold", "Handover", "Liftup"):
+            rs = [r for r in records if r.hand == hand and r.instruction.startswith(intent)]
+            if not rs:
+                continue
+            held = [r for r in rs if r.part_ok]
+            rows.append(
+                {
+                    "hand": hand,
+                    "intent": intent,
+                    "pairs": len(rs),
+                    "on_part": len(held) / len(rs),
+                    "intent_ok": _share([r.intent_ok for r in held]),
+                }
+            )
+    return rows
+
+
+def distinct_grasps(records: list[PairRecord]) -> dict[str, float]:
+    """For the same (hand, object, part), how far apart the grasps returned for different
+    intents are: pairs compared, mean wrist distance (cm) and the share that are the same
+    grasp (wrist within 1 mm and 1 degree)."""
+    by_key: dict[tuple, list[PairRecord]] = {}
+    for r in records:
+        if r.wrist is not None and r.part_ok:
+            by_key.setdefault((r.hand, r.category, r.seed, r.part), []).append(r)
+    dists, same = [], 0
+    for group in by_key.values():
+        for i, a in enumerate(group):
+            for b in group[i + 1 :]:
+                d = float(np.linalg.norm(np.subtract(a.wrist[:3], b.wrist[:3])))
+                dot = abs(float(np.dot(a.wrist[3:], b.wrist[3:])))
+                angle = float(np.degrees(2 * np.arccos(min(1.0, dot))))
+                dists.append(d)
+                same += d < 0.001 and angle < 1.0
+    return {
+        "pairs": len(dists),
+        "mean_wrist_distance_cm": 100 * float(np.mean(dists)) if dists else float("nan"),
+        "same_grasp": same / len(dists) if dists else float("nan"),
+    }
+
+
 def print_table(rows: list[dict]) -> None:
     print(
         f"{'hand':<8} {'pairs':>5} {'first-cand':>10} {'returned':>9} {'on part':>8} {'part acc':>9} "
-        f"{'solve med s':>11} {'s/grasp med':>11} {'solves/grasp':>12} {'errors':>6}"
+        f"{'solve med s':>11} {'s/grasp med':>11} {'solves/grasp':>12} {'errors':>6} "
+        f"{'intent ok':>9}"
     )
     for r in rows:
         print(
@@ -162,7 +227,8 @@ def print_table(rows: list[dict]) -> None:
             f"{r['returned_success']:>9.1%} {r['returned_on_part']:>8.1%} {r['part_accuracy']:>9.1%} "
             f"{r['median_solve_s']:>11.3f} "
             f"{r['median_time_per_returned_grasp_s']:>11.2f} "
-            f"{r['mean_solves_per_returned_grasp']:>12.2f} {r['errors']:>6}"
+            f"{r['mean_solves_per_returned_grasp']:>12.2f} {r['errors']:>6} "
+            f"{r['intent_ok']:>9.1%}"
         )
 
 
@@ -220,6 +286,17 @@ def main() -> None:
         + (f", settings {' '.join(args.set)}" if args.set else "")
     )
     print_table(summarize(records))
+    print("\nper intent: held on the part, and of those meeting the intent's definition")
+    for r in intent_rows(records):
+        print(
+            f"{r['hand']:<8} {r['intent']:<9} {r['pairs']:>5} {r['on_part']:>8.1%} "
+            f"{r['intent_ok']:>9.1%}"
+        )
+    d = distinct_grasps(records)
+    print(
+        f"distinct grasps: {d['pairs']} pairs of intents on the same (hand, object, part): mean "
+        f"wrist distance {d['mean_wrist_distance_cm']:.1f} cm, same grasp {d['same_grasp']:.0%}"
+    )
     if args.by_part:
         print_by_part(records)
 

@@ -35,6 +35,7 @@ from models.errors import DrograspError
 from models.hands import load_hand
 from planner.functional import CandidateResult, PlannerSettings, Proposal
 from planner.grasp_program import SolveResult
+from planner.intent import IntentCheck
 from planner.schedule import run_schedule
 
 # settings that only decide which recorded solves and verdicts are used; the others change the
@@ -51,7 +52,7 @@ REPLAYABLE = (
 
 
 # recorded stage times (CandidateResult.times) that a solved / a validated candidate costs
-SOLVE_STAGES = ("build", "propose", "solve", "quality")
+SOLVE_STAGES = ("build", "propose", "solve", "quality", "intent")
 VALIDATE_STAGES = ("pregrasp", "validate", "retry")
 
 
@@ -115,6 +116,7 @@ def _candidate(summary: dict) -> CandidateResult:
         summary["times"]["solve"],
     )
     proposal = Proposal(np.zeros(7), empty, np.zeros((4, 3)), np.zeros((4, 3)), 0.0)
+    intent = summary.get("intent_ok")  # absent from records made before intent checks
     return CandidateResult(
         summary["rank"],
         proposal,
@@ -122,6 +124,7 @@ def _candidate(summary: dict) -> CandidateResult:
         quality=summary["quality"],
         task_quality=summary["task_quality"],
         times=dict(summary["times"]),
+        intent=None if intent is None else IntentCheck("recorded", bool(intent), (), "recorded"),
     )
 
 
@@ -129,7 +132,8 @@ def proposals_used(record: PairRecord, settings: PlannerSettings) -> list[dict]:
     """The recorded proposals that planning with `settings` solves, ranked as
     FunctionalPlanner.propose orders them: the regular ones, then the pinches."""
     recorded = sorted(record.candidate_summaries, key=lambda c: c["rank"])
-    rows = [c for c in recorded if c.get("kind", "row") == "row"]
+    # the main ranking: regular proposals and (Hold) the power grasps between them
+    rows = [c for c in recorded if c.get("kind", "row") != "pinch"]
     pinches = [c for c in recorded if c.get("kind") == "pinch"]
     if len(rows) < settings.max_proposals:
         raise RecordsError(

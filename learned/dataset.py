@@ -26,7 +26,9 @@ from torch.utils.data import Dataset
 
 from models.errors import DrograspError
 
-FORMAT = "drograsp-grasps/2"
+FORMAT = "drograsp-grasps/3"
+# formats this code reads: /2 has no intent_ok column (read as -1, unknown)
+READABLE_FORMATS: tuple[str, ...] = ("drograsp-grasps/2", FORMAT)
 SPLIT_NAMES: tuple[str, ...] = ("train", "val", "test", "heldout")
 SOURCES: tuple[str, ...] = ("plan", "transfer")
 METRICS: tuple[str, ...] = (
@@ -55,7 +57,11 @@ ARRAYS: dict[str, tuple[str, tuple]] = {
     "dof_mask": ("bool", ("dof",)),
     "anchors": ("float32", (4, 3)),  # object points nearest the 4 anchor fingertips
     "metrics": ("float32", (len(METRICS),)),
+    # the grasp meets its intent's definition (planner.intent): 1 yes, 0 no, -1 not checked
+    "intent_ok": ("int8", ()),
 }
+# columns that older formats lack, and the value their rows read as
+ADDED_COLUMNS: dict[str, int] = {"intent_ok": -1}
 
 
 class DatasetError(DrograspError, ValueError):
@@ -95,8 +101,10 @@ def read_meta(root: str | Path) -> dict[str, Any]:
         ) from None
     if not isinstance(meta, dict):
         raise DatasetError(f"{path} is damaged (not a JSON object); restore it or make it again")
-    if meta.get("format") != FORMAT:
-        raise DatasetError(f"{path}: format {meta.get('format')!r}, this code reads {FORMAT!r}")
+    if meta.get("format") not in READABLE_FORMATS:
+        raise DatasetError(
+            f"{path}: format {meta.get('format')!r}, this code reads {READABLE_FORMATS}"
+        )
     return meta
 
 
@@ -116,6 +124,10 @@ def _read_block(root: str | Path, name: str, dof: int) -> dict[str, np.ndarray]:
             f"{path} is damaged ({type(err).__name__}: {err}); restore it (`git checkout` for "
             "a committed dataset) or make its block again (`drograsp dataset generate` resumes)"
         ) from None
+    n = len(arrays.get("hand", ()))
+    for key, fill in ADDED_COLUMNS.items():
+        if key not in arrays:
+            arrays[key] = np.full(n, fill, dtype=ARRAYS[key][0])
     missing = set(ARRAYS) - set(arrays)
     if missing:
         raise DatasetError(f"{path} lacks arrays {sorted(missing)}")
@@ -195,6 +207,7 @@ class GraspDataset(Dataset):
         }
         for key in ("wrist", "q_grasp", "q_pregrasp", "q_squeeze", "anchors", "metrics"):
             item[key] = torch.from_numpy(a[key][r].astype(np.float32))
+        item["intent_ok"] = int(a["intent_ok"][r])
         item["dof_mask"] = torch.from_numpy(a["dof_mask"][r].copy())
         return item
 

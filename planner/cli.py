@@ -26,7 +26,7 @@ EXIT_OK, EXIT_NO_GRASP, EXIT_BAD_INPUT = 0, 1, 2
 # Order is the order shown in `drograsp --help`; the text is each command's one-line help
 # (tests/test_cli.py checks it against the modules').
 COMMANDS: dict[str, str] = {
-    "demo": "plan two instructions on built-in objects with every hand; write a viewer page",
+    "demo": "plan three instructions on built-in objects with every hand; write viewer pages",
     "plan": "plan a functional grasp for an object, an instruction and a hand",
     "view": "show a grasp in Meshcat (live on localhost, or as a self-contained HTML page)",
     "validate": "simulate grasps (DexGraspBench layout) and report which hold",

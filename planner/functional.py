@@ -27,7 +27,8 @@ from scipy.spatial.transform import Rotation
 from models.errors import InstructionError, PlanningError
 from models.grasp import Grasp
 from models.hands import HandModel, load_hand
-from models.objects import Instruction, ObjectModel, load_object, parse_instruction
+from models.objects import INTENTS, Instruction, ObjectModel, load_object, parse_instruction
+from models.objects.intents import RULES, Definition
 from models.reproducible import rounded, rounded_within
 from planner.grasp_program import (
     GraspProgram,
@@ -37,6 +38,7 @@ from planner.grasp_program import (
     anchored,
     grasp_program,
 )
+from planner.intent import IntentCheck, check_configuration, intent_definition, region_points
 from planner.labels import voted_part
 from planner.quality import contact_quality
 from planner.schedule import run_schedule
@@ -103,6 +105,30 @@ class PlannerSettings:
     # solve order of the proposals: "anchors" (force closure of the planned anchors, best
     # first) or "clearance" (free space for the palm, the earlier order)
     proposal_order: str = "anchors"
+    # Shape proposals by the instruction's intent (models/objects/intents.py): Liftup from
+    # above, Handover and Use with anchors kept off the parts the hand must leave free, and
+    # validate candidates whose solved configuration meets the intent first (planner.schedule).
+    # False: proposals by part alone, as before the intent definitions.
+    intent_aware: bool = True
+    # validations in which candidates meeting the intent go first; then by quality alone
+    intent_first: int = 4
+    # after a grasp held on the part but missed its intent: proposals solved at most to find
+    # one that meets it
+    intent_search: int = 4
+    # Liftup: palm directions (palm -> object) tilted this far from straight down, besides
+    # straight down, at `liftup_azimuths` azimuths
+    liftup_tilt_deg: float = 20.0
+    liftup_azimuths: int = 4
+    # Liftup: anchors lie this far (m) below the part's top at most, where it is taller: fingers
+    # reaching down from above
+    liftup_reach: float = 0.045
+    # The grasp program's weights per intent (ProgramSettings field -> value), over `program`:
+    # Hold pulls the palm onto its target harder (palm contact), Liftup keeps the proposal's
+    # palm-down wrist rotation
+    intent_program: tuple[tuple[str, str, float], ...] = (
+        ("Hold", "palm_weight", 200.0),
+        ("Liftup", "wrist_rotation_weight", 1.0),
+    )
     program: ProgramSettings = field(default_factory=ProgramSettings)
 
     def __post_init__(self) -> None:
@@ -114,6 +140,19 @@ class PlannerSettings:
             raise PlanningError(
                 f"unknown proposal_order {self.proposal_order!r}; use one of {PROPOSAL_ORDERS}"
             )
+        if not 0 <= self.liftup_tilt_deg < 60 or self.liftup_azimuths < 0:
+            raise PlanningError(
+                "liftup_tilt_deg must be in [0, 60) and liftup_azimuths 0 or more, got "
+                f"{self.liftup_tilt_deg} and {self.liftup_azimuths}"
+            )
+        for intent, name, _ in self.intent_program:
+            if intent not in INTENTS or name not in ProgramSettings.__dataclass_fields__:
+                raise PlanningError(
+                    f"intent_program entry ({intent!r}, {name!r}): expected an intent of "
+                    f"{INTENTS} and a ProgramSettings field"
+                )
+        if self.liftup_reach <= 0:
+            raise PlanningError(f"liftup_reach must be positive, got {self.liftup_reach}")
 
 
 RANKINGS = ("task", "epsilon")
@@ -149,12 +188,25 @@ class CandidateResult:
     task_quality: float = -1.0  # largest test force the contacts resist (planner.quality)
     order: int | None = None  # position in the validation order, if validated
     times: dict[str, float] = field(default_factory=dict)
+    # the solved configuration against the instruction's intent (planner.intent); None when
+    # not checked (unsolved, or planned without intent awareness)
+    intent: IntentCheck | None = None
+
+    @property
+    def intent_ok(self) -> bool | None:
+        return None if self.intent is None else self.intent.ok
 
     def summary(self) -> dict[str, Any]:
         return {
             "rank": self.rank,
             "kind": self.proposal.kind,
             "solved": self.solve.ok,
+            "intent_ok": self.intent_ok,
+            "intent_failed": (
+                None
+                if self.intent is None
+                else [c.name for c in self.intent.criteria if not c.passed]
+            ),
             "solve_message": self.solve.message,
             "success": self.success,
             "part": self.part,
@@ -203,6 +255,12 @@ class PlanResult:
     def part_touched(self) -> str | None:
         return None if self.best is None else self.best.part
 
+    @property
+    def intent_ok(self) -> bool | None:
+        """Does the returned grasp meet its intent's definition (None: no grasp, or not
+        checked)?"""
+        return None if self.best is None else self.best.intent_ok
+
     def stage_times(self) -> dict[str, float]:
         total: dict[str, float] = {}
         for c in self.candidates:
@@ -218,6 +276,8 @@ class PlanResult:
             "success": self.success,
             "part_instructed": self.instruction.part,
             "part_touched": self.part_touched,
+            "intent_ok": self.intent_ok,
+            "intent": None if best is None or best.intent is None else best.intent.reason,
             "anchor_error_mm": None if best is None else 1000 * best.solve.anchor_error,
             "candidates_solved": len(self.candidates),
             "candidates_validated": sum(c.order is not None for c in self.candidates),
@@ -228,6 +288,23 @@ class PlanResult:
             "times_s": self.stage_times(),
             "notes": self.notes,
         }
+
+
+@dataclass(frozen=True)
+class _Shape:
+    """Where proposals go: the part's points anchors may use, the (palm direction, finger row
+    axis, row sign) frames, the point whose position along the row axis the anchors centre on
+    (None: the object's centre of mass) and how much anchors favour the part's side nearest
+    the palm (FunctionalPlanner._proposal's `toward_palm`)."""
+
+    away: np.ndarray
+    frames: list[tuple]
+    target: np.ndarray | None = None
+    toward_palm: float = 0.0
+    palm_first: bool = False  # Hold: power grasps with the palm on the part (_palm_first)
+    # proposals from this shape and by part alone in turn (FunctionalPlanner.propose): where
+    # the intent's proposals all slip, the part still gets a grasp
+    mix: bool = False
 
 
 class HandGeometry:
@@ -271,8 +348,11 @@ class FunctionalPlanner:
         return HandGeometry(self.hand)
 
     # ---- proposals ------------------------------------------------------------------------
-    def propose(self, obj: ObjectModel, part: str) -> list[Proposal]:
-        """Wrist poses and anchors on `part`, best first."""
+    def propose(
+        self, obj: ObjectModel, part: str, intent: Definition | None = None
+    ) -> list[Proposal]:
+        """Wrist poses and anchors on `part`, best first; shaped by the intent's definition
+        where one is given and `intent_aware` is set (`_Shape`)."""
         points, normals, labels = obj.points, obj.normals, obj.point_labels
         mask = labels == obj.part_names.index(part)
         pts, nrm = points[mask], normals[mask]
@@ -283,11 +363,8 @@ class FunctionalPlanner:
         centre = pts.mean(axis=0)
         _, _, axes = np.linalg.svd(pts - centre, full_matrices=False)
         e1, e2, e3 = _canonical_axes(axes)
-        t = (pts - centre) @ e1
         geo = self.geometry
-        spacing = min(geo.spacing, max((t.max() - t.min()) / 3, 0.005))
         tree = cKDTree(points)
-        away = self._away_from_border(points[~mask], pts)
         palm_on_thin = self.settings.palm_on_thin_parts
         if palm_on_thin is None:
             palm_on_thin = self.hand.meta.palm_on_thin_parts
@@ -298,29 +375,153 @@ class FunctionalPlanner:
         # Anchors sit on the part as near the object's centre of mass as the part allows: a
         # handle held at its far end lets gravity twist a knife or pan out of the fingers.
         com = points.mean(axis=0)
-        t_mass = float((com - centre) @ e1) if self.settings.mass_centred else 0.0
+        plain = _Shape(self._away_from_border(points[~mask], pts), self._frames(e1, e2, e3))
+        shape = plain
+        if intent is not None and self.settings.intent_aware:
+            shape = self._shape(obj, mask, intent, plain, (e1, e2, e3))
         pinches = self.settings.pinch_proposals
         if pinches is None:
             pinches = self.hand.meta.pinch_proposals
-        # the two pinch fingers sit closer together than a row's ends, within the part
-        pinch_spacing = min(geo.spacing, max(np.ptp(t) / 2, 0.005))
-        rows, pinch = [], []
-        for theta in np.deg2rad(np.arange(0, 360, self.settings.approach_step_deg)):
-            # palm -> object, across the long axis
-            v = rounded(np.cos(theta) * e2 + np.sin(theta) * e3)
-            for lateral_sign in (1.0, -1.0):  # finger row along +e1 or -e1
+
+        def build(shape: _Shape) -> tuple[list[Proposal], list[Proposal], list[Proposal]]:
+            """Regular, pinch and palm-first proposals of every frame of `shape`."""
+            rows, pinch, palm = [], [], []
+            for v, axis, lateral_sign in shape.frames:
                 rot, _ = Rotation.align_vectors(
-                    [v, lateral_sign * e1], [geo.normal, geo.lateral], weights=[10, 1]
+                    [v, lateral_sign * axis], [geo.normal, geo.lateral], weights=[10, 1]
                 )
                 u = rounded(rot.apply(geo.opposition))  # thumb -> fingers, in the world
-                frame = (pts, nrm, t, away, t_mass, centre, rot, u, v, e1)
-                rows.append(self._proposal(*frame, spacing, tree, with_palm))
+                t = (pts - centre) @ axis
+                if shape.target is not None:
+                    t_mass = float((shape.target - centre) @ axis)
+                else:
+                    t_mass = float((com - centre) @ axis) if self.settings.mass_centred else 0.0
+                spacing = min(geo.spacing, max(np.ptp(t) / 3, 0.005))
+                frame = (pts, nrm, t, shape.away, t_mass, centre, rot, u, v, axis)
+                rows.append(self._proposal(*frame, spacing, tree, with_palm, shape.toward_palm))
+                if shape.palm_first:
+                    palm.append(
+                        self._palm_first(pts, nrm, shape.away, t_mass, centre, rot, v, axis, tree)
+                    )
                 if pinches:
-                    pinch.append(self._proposal(*frame, pinch_spacing, tree, with_palm, pinch=True))
+                    # the two pinch fingers sit closer together than a row's ends, in the part
+                    pinch_spacing = min(geo.spacing, max(np.ptp(t) / 2, 0.005))
+                    pinch.append(
+                        self._proposal(
+                            *frame, pinch_spacing, tree, with_palm, shape.toward_palm, pinch=True
+                        )
+                    )
+            return rows, pinch, palm
+
+        rows, pinch, palm = build(shape)
         # Pinches come after every regular proposal: mixed into their ranking by anchor closure
         # they did worse for every hand on the val replays (docs/planner_log.md "Pinch proposals").
-        rows = self._ordered(rows, com)[: self.settings.max_proposals]
-        return rows + self._ordered(pinch, com)[:pinches]
+        pinch = self._ordered(pinch, com)[:pinches]
+        most = self.settings.max_proposals
+        if palm:  # Hold: power grasps and regular proposals in turn
+            rows = _alternate(self._ordered(palm, com), self._ordered(rows, com))
+        elif shape.mix:  # the intent's proposals and proposals by part alone in turn
+            rows = _alternate(self._ordered(rows, com), self._ordered(build(plain)[0], com))
+        else:
+            rows = self._ordered(rows, com)
+        return rows[:most] + pinch
+
+    def _frames(self, e1: np.ndarray, e2: np.ndarray, e3: np.ndarray) -> list[tuple]:
+        """(palm -> object direction, finger row axis, row sign): the palm facing the part from
+        every `approach_step_deg` around its long axis, the finger row along it either way."""
+        frames = []
+        for theta in np.deg2rad(np.arange(0, 360, self.settings.approach_step_deg)):
+            v = rounded(np.cos(theta) * e2 + np.sin(theta) * e3)
+            frames += [(v, e1, 1.0), (v, e1, -1.0)]
+        return frames
+
+    def _liftup_frames(self, e1: np.ndarray, e2: np.ndarray) -> list[tuple]:
+        """Liftup: the palm facing down (straight, and tilted by `liftup_tilt_deg` at
+        `liftup_azimuths` azimuths), the finger row along the part's long axis as seen from
+        above and at 45-degree steps from it."""
+        s = self.settings
+        down = np.array([0.0, 0.0, -1.0])
+        dirs = [down]
+        tilt = np.deg2rad(s.liftup_tilt_deg)
+        for k in range(s.liftup_azimuths if tilt > 0 else 0):
+            a = 2 * np.pi * k / s.liftup_azimuths
+            dirs.append(
+                np.array([np.sin(tilt) * np.cos(a), np.sin(tilt) * np.sin(a), -np.cos(tilt)])
+            )
+        frames = []
+        for v in dirs:
+            v = rounded(v)
+            base = next(
+                (b - (b @ v) * v for b in (e1, e2) if np.linalg.norm(b - (b @ v) * v) > 0.5),
+                np.cross(v, [1.0, 0.0, 0.0]),
+            )
+            base = base / np.linalg.norm(base)
+            for turn in np.deg2rad([0.0, 45.0, 90.0, 135.0]):
+                axis = rounded(
+                    Rotation.from_rotvec(turn * v).apply(base)
+                )  # stays perpendicular to v
+                frames += [(v, axis, 1.0), (v, axis, -1.0)]
+        return frames
+
+    def _shape(
+        self,
+        obj: ObjectModel,
+        mask: np.ndarray,
+        intent: Definition,
+        shape: _Shape,
+        axes: tuple[np.ndarray, np.ndarray, np.ndarray],
+    ) -> _Shape:
+        """Proposals for the intent's definition (models/objects/intents.py).
+
+        Use: anchors a fingertip's width beyond the working clearance from the working parts.
+        Handover: anchors 2 cm plus a fingertip's width from every other part (or 1 cm short of
+        the part's farthest point from them, where it is smaller: a bottle's neck), toward the
+        part's end away from the receiver's parts, and the palm on the side away from them.
+        Liftup: the palm facing down, anchors within `liftup_reach` below the part's top and
+        on the part's upper side. Hold: as by part (its palm contact and force closure are
+        checked on the solved candidates)."""
+        pts = obj.points[mask]
+        tip = float(np.mean(self.geometry.tip_radii))
+        away = shape.away
+
+        def clear_of(others: np.ndarray, distance: float) -> np.ndarray:
+            if len(others) == 0:
+                return away
+            gap, _ = cKDTree(others).query(pts)
+            keep = away & (gap >= min(distance, float(gap.max()) - 0.01))
+            return keep if keep.sum() >= 8 else away
+
+        if intent.intent == "Use" and intent.working:
+            working = np.vstack([region_points(obj, r) for r in intent.working])
+            away = clear_of(working, RULES.use.working_clearance + tip)
+            return _Shape(away, shape.frames)
+        if intent.intent == "Handover":
+            others = obj.points[~mask]
+            away = clear_of(others, RULES.handover.other_part_clearance + tip)
+            free = np.isin(obj.point_labels, [obj.part_names.index(p) for p in intent.receiver])
+            if not free.any():
+                return _Shape(away, shape.frames, mix=True)
+            held = pts.mean(axis=0)
+            toward = obj.points[free].mean(axis=0) - held
+            toward /= np.linalg.norm(toward)
+            # the anchors' centre at the allowed points' far end from the receiver
+            far = pts[away][np.argmin(pts[away] @ toward)]
+            target = held + ((far - held) @ toward) * toward
+            frames = [f for f in shape.frames if f[0] @ toward >= -0.2] or shape.frames
+            return _Shape(away, frames, target=target, mix=True)
+        if intent.intent == "Liftup":
+            height = pts[:, 2]
+            if np.ptp(height) > self.settings.liftup_reach:
+                upper = away & (height >= height.max() - self.settings.liftup_reach)
+                away = upper if upper.sum() >= 8 else away
+            frames = self._liftup_frames(axes[0], axes[1])
+            return _Shape(away, frames, toward_palm=0.5, mix=True)
+        if intent.intent == "Hold":
+            offsets = pts - pts.mean(axis=0)
+            width = max(np.ptp(offsets @ axes[1]), np.ptp(offsets @ axes[2]))
+            # palm contact is asked where the part is as wide as the Hold rule says
+            return replace(shape, palm_first=bool(width >= RULES.hold.palm_min_width))
+        return shape
 
     def _ordered(self, proposals: list[Proposal], com: np.ndarray) -> list[Proposal]:
         """Best anchor force closure first: on 150 train pairs with every candidate validated,
@@ -350,6 +551,39 @@ class FunctionalPlanner:
         border, _ = cKDTree(others).query(pts)
         return border >= min(self.settings.border_margin, 0.5 * float(border.max()))
 
+    def _palm_first(self, pts, nrm, away, t_mass, centre, rot, v, axis, tree) -> Proposal:
+        """A power grasp for Hold: the palm centre `palm_margin` off the part's near side
+        (across from the part's centre of mass along the row axis), and the anchors where the
+        half-closed fingertips then are, snapped to the part's allowed points."""
+        geo = self.geometry
+        t = (pts - centre) @ axis
+        line = centre + float(np.clip(t_mass, t.min(), t.max())) * axis
+        off_axis = (pts - line) - np.outer((pts - line) @ v, v)
+        near_line = np.linalg.norm(off_axis, axis=1) < 0.015
+        if not near_line.any():
+            near_line = np.ones(len(pts), dtype=bool)
+        nearest = pts[near_line][np.argmin(pts[near_line] @ v)]
+        palm_target = nearest - v * self.settings.palm_margin
+        position = palm_target - rot.apply(np.asarray(self.hand.meta.palm.center, dtype=float))
+        tips = rot.apply(geo.half_tips) + position
+        allowed = np.flatnonzero(away)
+        _, snap = cKDTree(pts[allowed]).query(tips)
+        chosen = allowed[snap]
+        anchors, normals = pts[chosen], nrm[chosen]
+        palm_clear = min(
+            float(tree.query(palm_target - v * self.settings.approach_clearance)[0]), 0.1
+        )
+        wrist = np.concatenate([position, rot.as_quat(scalar_first=True)])
+        return Proposal(
+            rounded(wrist),
+            geo.q_half.copy(),
+            rounded(anchors),
+            rounded(normals),
+            rounded(palm_clear),
+            rounded(palm_target),
+            kind="palm",
+        )
+
     def _proposal(
         self,
         pts,
@@ -361,14 +595,15 @@ class FunctionalPlanner:
         rot,
         u,
         v,
-        e1,
+        axis,
         spacing,
         tree,
         with_palm,
+        toward_palm=0.0,
         pinch=False,
     ) -> Proposal:
         geo = self.geometry
-        lateral_sign = np.sign(rot.apply(geo.lateral) @ e1) or 1.0
+        lateral_sign = np.sign(rot.apply(geo.lateral) @ axis) or 1.0
         half_width = max(0.006, 0.15 * (t.max() - t.min()))
         t_mid = (
             float(np.clip(t_mass, t.min() + spacing, t.max() - spacing))
@@ -376,7 +611,7 @@ class FunctionalPlanner:
             else 0.0
         )
 
-        def extreme(t_at: float, direction: np.ndarray, toward_palm: float = 0.0) -> int:
+        def extreme(t_at: float, direction: np.ndarray, toward_palm: float = toward_palm) -> int:
             gap = np.where(away, np.abs(t - t_at), np.inf)
             near = gap < half_width
             if not near.any():
@@ -386,7 +621,7 @@ class FunctionalPlanner:
             height = rounded(pts[idx] @ direction - toward_palm * (pts[idx] @ v))
             return int(idx[np.argmax(height)])
 
-        def fingers(toward_palm: float = 0.0) -> list[int]:
+        def fingers(toward_palm: float = toward_palm) -> list[int]:
             steps = (-0.5, 0.5) if pinch else (-1, 0, 1)
             offsets = [t_mid + k * lateral_sign * spacing for k in steps]
             return [extreme(t_at, u, toward_palm) for t_at in offsets]
@@ -445,9 +680,14 @@ class FunctionalPlanner:
                 f"part {part!r} is not a part of this object; its parts are {', '.join(obj.part_names)}"
             )
         start = time.perf_counter()
-        program = grasp_program(self.hand, obj.collision_pieces(), self.settings.program)
+        meaning = intent_definition(obj, instruction) if self.settings.intent_aware else None
+        program_settings = self.settings.program
+        if meaning is not None:
+            changes = {k: v for i, k, v in self.settings.intent_program if i == meaning.intent}
+            program_settings = replace(program_settings, **changes)
+        program = grasp_program(self.hand, obj.collision_pieces(), program_settings)
         build = time.perf_counter() - start
-        proposals = self.propose(obj, part)
+        proposals = self.propose(obj, part, meaning)
         propose_time = time.perf_counter() - start - build
         # Solved a batch at a time, each batch validated best first (planner.schedule), so that
         # good grasps are found without solving every proposal.
@@ -456,6 +696,12 @@ class FunctionalPlanner:
             cand = self._solve(program, obj, rank, proposals[rank])
             if rank == 0:
                 cand.times.update(build=build, propose=propose_time)
+            if meaning is not None and cand.solve.ok:
+                t0 = time.perf_counter()
+                cand.intent = check_configuration(
+                    cand.solve.wrist, cand.solve.q, obj, self.hand, instruction
+                )
+                cand.times["intent"] = time.perf_counter() - t0
             return cand
 
         def validate(cand: CandidateResult) -> None:
@@ -463,9 +709,14 @@ class FunctionalPlanner:
 
         scheduled = run_schedule(len(proposals), solve, validate, part, self.settings)
         candidates = scheduled.candidates
-        if scheduled.found is not None:
-            grasp = scheduled.found.grasp
-            return PlanResult(instruction, self.hand.name, grasp, candidates, notes)
+        if scheduled.on_part is not None:
+            chosen = scheduled.on_part
+            if scheduled.found is None:
+                notes.append(
+                    f"no holding grasp on the {part} met the {instruction.intent} definition; "
+                    f"returning one that does not ({chosen.intent.reason})"
+                )
+            return PlanResult(instruction, self.hand.name, chosen.grasp, candidates, notes)
         fallback = scheduled.fallback
         if fallback is not None:
             notes.append(
@@ -500,9 +751,19 @@ class FunctionalPlanner:
         """Complete the candidate's grasp, validate it and vote its part (fills `cand`)."""
         done = finish_grasp(program, obj, cand.solve, instruction.text, self.settings.protocol)
         done.grasp.metrics["epsilon"] = cand.quality
+        if cand.intent is not None:
+            done.grasp.metrics["intent_ok"] = cand.intent.ok
+            done.grasp.metrics["intent"] = cand.intent.to_dict()
         cand.grasp, cand.success, cand.part = done.grasp, done.success, done.part
         cand.validation = done.validation
         cand.times.update(done.times)
+
+
+def _alternate(a: list[Proposal], b: list[Proposal]) -> list[Proposal]:
+    """a[0], b[0], a[1], b[1], ...: every window of the ranking holds both kinds (a batch of
+    two solves one of each; a dataset variant's window of four, two of each)."""
+    out = [x for pair in zip(a, b, strict=False) for x in pair]
+    return out + a[len(b) :] + b[len(a) :]
 
 
 def _across(

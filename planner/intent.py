@@ -78,7 +78,11 @@ class IntentCheck:
             "intent": self.intent,
             "ok": self.ok,
             "reason": self.reason,
-            "criteria": {c.name: asdict(c) for c in self.criteria},
+            # JSON has no infinity: an unmeasurable value ("no free end") is null
+            "criteria": {
+                c.name: asdict(c) | {"value": c.value if np.isfinite(c.value) else None}
+                for c in self.criteria
+            },
         }
 
 
@@ -477,6 +481,12 @@ def intent_definition(obj: ObjectModel, instruction: Instruction | str) -> Defin
     return Definition(cat or obj.name, ins.intent, ins.part, crit, receiver=others)
 
 
+def region_points(obj: ObjectModel, region: Region) -> np.ndarray:
+    """The object's surface points of a working part or of its working end (a Use rule's
+    `Region`), as the Use check measures them."""
+    return _object_facts(obj).region(region)
+
+
 def check_configuration(
     wrist: np.ndarray,
     q: np.ndarray,
@@ -550,4 +560,5 @@ __all__ = [
     "contacts",
     "intent_definition",
     "mass_centre",
+    "region_points",
 ]

@@ -20,14 +20,31 @@ if TYPE_CHECKING:  # planner.functional imports this module
 @dataclass
 class Scheduled:
     candidates: list[CandidateResult]  # every solved candidate, in solve (proposal) order
-    found: CandidateResult | None  # the first validated one that held on the instructed part
+    # the first validated one that held on the instructed part and meets the intent
+    found: CandidateResult | None
     fallback: CandidateResult | None  # the first validated one that held on any part
+    # the first validated one that held on the instructed part but missed the intent: returned
+    # when no candidate meets the intent
+    off_intent: CandidateResult | None = None
+
+    @property
+    def on_part(self) -> CandidateResult | None:
+        """What planning returns when a grasp held on the instructed part."""
+        return self.found or self.off_intent
 
 
-def validation_key(cand: CandidateResult, ranking: str) -> tuple[float, int]:
-    """Validation order: best quality first (task metric or epsilon), then proposal rank."""
+def meets_intent(cand: CandidateResult) -> bool:
+    """Unknown (None: not checked, as in records made before intent checks) counts as met."""
+    return cand.intent_ok is not False
+
+
+def validation_key(
+    cand: CandidateResult, ranking: str, prefer_intent: bool = True
+) -> tuple[bool, float, int]:
+    """Validation order: candidates meeting their intent first (where preferred), then best
+    quality (task metric or epsilon), then proposal rank."""
     quality = cand.task_quality if ranking == "task" else cand.quality
-    return (-quality, cand.rank)
+    return (prefer_intent and not meets_intent(cand), -quality, cand.rank)
 
 
 def run_schedule(
@@ -38,7 +55,15 @@ def run_schedule(
     settings: PlannerSettings,
 ) -> Scheduled:
     """Solve proposals 0..count-1 a batch at a time and validate the solved candidates best
-    first, until one holds on `part` or `settings.max_candidates` are validated.
+    first, until one holds on `part` and meets its intent, or `settings.max_candidates` are
+    validated.
+
+    Candidates whose solved configuration meets the intent (`intent_ok`, planner.intent) are
+    validated before the others for the first `intent_first` validations; after them the
+    queue goes by quality alone, so that a part whose intent-meeting candidates slip still gets
+    a grasp. Once a grasp has held on the part without meeting the intent, only candidates
+    meeting it are validated, and at most `intent_search` more proposals are solved: it is
+    returned unless one of them holds.
 
     Candidates without force closure (epsilon below `min_quality`) rarely hold: they wait until
     `gate_solves` proposals are solved, then queue with the rest by task metric. Once
@@ -52,6 +77,7 @@ def run_schedule(
     deferred: list[CandidateResult] = []  # solved with weak closure, held back by the gate
     found: CandidateResult | None = None
     fallback: CandidateResult | None = None
+    off_intent: CandidateResult | None = None
     position = 0
 
     def sweeping() -> bool:
@@ -60,26 +86,42 @@ def run_schedule(
     def validate_queue() -> bool:
         """Validate the queue best first; True once a grasp holds on the part. Returns early,
         leaving the rest queued, when the sweep is due and proposals are left unsolved."""
-        nonlocal position, found, fallback
-        queue.sort(key=lambda c: validation_key(c, s.ranking))
+        nonlocal position, found, fallback, off_intent, solved_at_off
         while queue and position < s.max_candidates:
-            if sweeping() and len(candidates) < count:
+            if sweeping() and searching() > 0:
                 return False
+            prefer = off_intent is not None or position < s.intent_first
+            queue.sort(key=lambda c: validation_key(c, s.ranking, prefer))
+            if off_intent is not None and not s.validate_all and not meets_intent(queue[0]):
+                return False  # the queue holds no candidate that could do better
             cand = queue.pop(0)
             cand.order = position
             position += 1
             validate(cand)
-            if cand.success and cand.part == part and found is None:
-                found = cand
-                if not s.validate_all:
-                    return True
+            if cand.success and cand.part == part:
+                if meets_intent(cand) and found is None:
+                    found = cand
+                    if not s.validate_all:
+                        return True
+                elif not meets_intent(cand) and off_intent is None:
+                    off_intent = cand
+                    solved_at_off = len(candidates)
             if cand.success and fallback is None:
                 fallback = cand
         return False
 
-    while len(candidates) < count and position < s.max_candidates:
+    def searching() -> int:
+        """Proposals still to solve: after a hold that missed the intent, `intent_search`
+        more at most (the search for one meeting it is paid in solves)."""
+        left = count - len(candidates)
+        if off_intent is None or s.validate_all:
+            return left
+        return min(left, solved_at_off + s.intent_search - len(candidates))
+
+    solved_at_off = 0
+    while searching() > 0 and position < s.max_candidates:
         first = len(candidates)
-        size = count if sweeping() else s.solve_batch
+        size = min(count if sweeping() else s.solve_batch, searching())
         solved = [solve(i) for i in range(first, min(first + size, count))]
         candidates.extend(solved)
         queue += [c for c in solved if c.solve.ok and c.quality >= s.min_quality]
@@ -91,4 +133,6 @@ def run_schedule(
     if found is None and fallback is None:
         queue += deferred
         validate_queue()
-    return Scheduled(candidates, found, fallback)
+    elif found is None and off_intent is not None:
+        validate_queue()  # the intent-meeting candidates of the last solves
+    return Scheduled(candidates, found, fallback, off_intent)

@@ -213,8 +213,11 @@ def test_viewer_page_renders_in_headless_chromium(tmp_path):
 def test_demo_lists_every_hand(tmp_path):
     run = _cli("demo", "--out", str(tmp_path), "--hands", "allegro")
     assert "allegro" in run.stdout and "Use a mug by handle" in run.stdout
-    assert (tmp_path / "index.html").exists()
-    assert json.loads((tmp_path / "allegro_bottle_1.json").read_text())["hand"] == "allegro"
+    assert "Liftup a mug by handle" in run.stdout and "intent met" in run.stdout
+    index = (tmp_path / "index.html").read_text()
+    assert "One part, two intents" in index and "allegro_mug_3_liftup.html" in index
+    hold = json.loads((tmp_path / "allegro_bottle_1_hold.json").read_text())
+    assert hold["hand"] == "allegro" and "intent_ok" in hold["metrics"]
 
 
 def test_task_quality_needs_closure_and_falls_with_a_far_centre_of_mass():
@@ -296,7 +299,7 @@ def test_weak_candidates_wait_only_for_the_first_solves(monkeypatch):
     for gate, solves in ((6, 6), (4, 4), (99, 16)):
         # the gate alone: no sweep after the failed validations of proposals 0-2
         settings = PlannerSettings(
-            gate_solves=gate, solve_batch=2, max_proposals=16, sweep_after=None
+            gate_solves=gate, solve_batch=2, max_proposals=16, sweep_after=None, intent_aware=False
         )
         result = FunctionalPlanner("allegro", settings).plan(obj, "Hold a bottle by body")
         assert result.success and result.best.rank == 3
@@ -310,7 +313,7 @@ def test_after_failed_validations_the_rest_are_solved_and_the_best_validated(mon
     # strong closure everywhere; the later proposals have the better task metric
     _fake_solves_and_verdicts(monkeypatch, 0.5, lambda rank: rank / 100, holder=12)
     obj = make_object("bottle", 1)
-    base = {"solve_batch": 2, "max_proposals": 16, "max_candidates": 8}
+    base = {"solve_batch": 2, "max_proposals": 16, "max_candidates": 8, "intent_aware": False}
     result = FunctionalPlanner("allegro", PlannerSettings(sweep_after=4, **base)).plan(
         obj, "Hold a bottle by body"
     )
@@ -330,7 +333,12 @@ def test_the_sweep_does_not_wait_for_the_queue_the_gate_released(monkeypatch):
     # weak closure everywhere (held back by the gate); later proposals rank higher
     _fake_solves_and_verdicts(monkeypatch, 0.05, lambda rank: rank / 100, holder=12)
     settings = PlannerSettings(
-        solve_batch=2, max_proposals=16, max_candidates=8, gate_solves=6, sweep_after=4
+        solve_batch=2,
+        max_proposals=16,
+        max_candidates=8,
+        gate_solves=6,
+        sweep_after=4,
+        intent_aware=False,
     )
     result = FunctionalPlanner("allegro", settings).plan(
         make_object("bottle", 1), "Hold a bottle by body"

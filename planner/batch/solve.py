@@ -14,11 +14,13 @@ from typing import Any
 import numpy as np
 
 from models.grasp import Grasp
+from models.hands import load_hand
 from models.objects import ObjectModel, parse_instruction
 from planner.batch.jobs import Job
 from planner.batch.transfer import transfer_grasp
 from planner.batch.variants import VariantPlanner
 from planner.functional import PlannerSettings
+from planner.intent import check_intent
 from planner.objectref import resolve_object
 
 NONDETERMINISTIC_KEYS = ("wall_time",)  # measured, not computed: moved into `times`
@@ -101,6 +103,7 @@ def solve_job(job: Job) -> dict[str, Any]:
         "part_voted": result.part_touched,
         "part_instructed": instruction.part,
         "valid": bool(result.success and result.part_touched == instruction.part),
+        "intent_ok": result.intent_ok,
         "proposal": None if best is None else planner.proposal_index(best.rank),
         "candidates_tried": len(result.candidates),
         "anchor_error": None if best is None else float(best.solve.anchor_error),
@@ -129,12 +132,16 @@ def _transfer(job: Job, obj: ObjectModel, part: str, times: dict[str, float]) ->
     source = Grasp.from_dict(job.source["grasp"])
     done = transfer_grasp(source, job.hand, obj, source=job.source["hand"], protocol=job.protocol)
     times.update({k: float(v) for k, v in done.times.items()})
+    if done.grasp is not None and obj.labelled:  # the transferred grasp against its intent
+        check = check_intent(done.grasp, obj, load_hand(job.hand), job.instruction)
+        done.grasp.metrics.update(intent_ok=check.ok, intent=check.to_dict())
     validation = _strip_measured(done.validation, times)
     return {
         "success": done.success,
         "part_voted": done.part,
         "part_instructed": part,
         "valid": bool(done.success and done.part == part),
+        "intent_ok": None if done.grasp is None else done.grasp.metrics.get("intent_ok"),
         "proposal": None,
         "candidates_tried": 1,
         "anchor_error": float(done.solve.anchor_error),

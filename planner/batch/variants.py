@@ -13,6 +13,7 @@ from dataclasses import replace
 
 from models.hands import HandModel
 from models.objects import ObjectModel
+from models.objects.intents import Definition
 from planner.functional import FunctionalPlanner, PlannerSettings, Proposal
 
 ALL_PROPOSALS = sys.maxsize
@@ -34,8 +35,10 @@ class VariantPlanner(FunctionalPlanner):
         )
         self._count = 0
 
-    def propose(self, obj: ObjectModel, part: str) -> list[Proposal]:
-        ranked = self._ranker.propose(obj, part)
+    def propose(
+        self, obj: ObjectModel, part: str, intent: Definition | None = None
+    ) -> list[Proposal]:
+        ranked = self._ranker.propose(obj, part, intent)
         self._count = len(ranked)
         k = self.offset % max(len(ranked), 1)
         return (ranked[k:] + ranked[:k])[: self.settings.max_candidates]

@@ -10,17 +10,25 @@ import time
 from models.hand_names import builtin_hands, check_hand_name
 from models.paths import output_folder, write_text_atomic
 
-# (category, seed, instruction): one of them is the paper's running example
-DEMO_TASKS = (("mug", 3, "Use a mug by handle"), ("bottle", 1, "Hold a bottle by body"))
+# (category, seed, instruction): the paper's running example, the same handle taken for
+# another intent (Liftup: from above, palm down), and a power grasp
+DEMO_TASKS = (
+    ("mug", 3, "Use a mug by handle"),
+    ("mug", 3, "Liftup a mug by handle"),
+    ("bottle", 1, "Hold a bottle by body"),
+)
+# the two tasks the index page shows side by side for each hand: one part, two intents
+SIDE_BY_SIDE = ("Use a mug by handle", "Liftup a mug by handle")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "demo",
-        help="plan two instructions on built-in objects with every hand; write a viewer page",
-        description="Plan 'Use a mug by handle' and 'Hold a bottle by body' with each built-in "
-        "hand (Drake grasp program + MuJoCo validation), print a table, and write HTML pages "
-        "showing every grasp.",
+        help="plan three instructions on built-in objects with every hand; write viewer pages",
+        description="Plan 'Use a mug by handle', 'Liftup a mug by handle' and 'Hold a bottle by "
+        "body' with each built-in hand (Drake grasp program + MuJoCo validation), print a table "
+        "(does each grasp hold, on which part, does it meet its intent), and write HTML pages "
+        "showing every grasp, the two intents on the mug's handle side by side.",
     )
     p.add_argument(
         "--out", default="drograsp_demo", help="folder for the pages (default drograsp_demo)"
@@ -45,7 +53,10 @@ def run(args: argparse.Namespace) -> int:
         flush=True,
     )
     rows = []
-    header = f"{'hand':<8} {'instruction':<24} {'success':<8} {'part touched':<13} {'time s':>7}"
+    header = (
+        f"{'hand':<8} {'instruction':<24} {'success':<8} {'part touched':<13} "
+        f"{'intent met':<10} {'time s':>7}"
+    )
     print(header)
     print("-" * len(header))
     for hand_name in hands:
@@ -59,13 +70,15 @@ def run(args: argparse.Namespace) -> int:
             page = None
             if result.grasp is not None:
                 result.grasp.metrics["object"] = object_ref(obj)
-                stem = f"{hand_name}_{category}_{seed}"
+                stem = f"{hand_name}_{category}_{seed}_{text.split()[0].lower()}"
                 result.grasp.save(out / f"{stem}.json")
                 page = write_html(result.grasp, obj, hand, out / f"{stem}.html").name
-            rows.append((hand_name, text, result.success, result.part_touched, elapsed, page))
+            intent = _yes_no(result.intent_ok)
+            row = (hand_name, text, result.success, result.part_touched, intent, elapsed, page)
+            rows.append(row)
             print(
                 f"{hand_name:<8} {text:<24} {'yes' if result.success else 'no':<8} "
-                f"{result.part_touched or '-':<13} {elapsed:>7.2f}",
+                f"{result.part_touched or '-':<13} {intent:<10} {elapsed:>7.2f}",
                 flush=True,
             )
     index = write_text_atomic(out / "index.html", _index_page(rows), "demo index page")
@@ -74,16 +87,35 @@ def run(args: argparse.Namespace) -> int:
     return 0 if held else 1
 
 
+def _yes_no(flag: bool | None) -> str:
+    return "-" if flag is None else ("yes" if flag else "no")
+
+
 def _index_page(rows) -> str:
     body = "".join(
         f"<tr><td>{html.escape(h)}</td><td>{html.escape(t)}</td><td>{'yes' if ok else 'no'}</td>"
-        f"<td>{html.escape(p or '-')}</td><td>{s:.2f}</td>"
+        f"<td>{html.escape(p or '-')}</td><td>{i}</td><td>{s:.2f}</td>"
         f"<td>{f'<a href={page!r}>view</a>' if page else '-'}</td></tr>"
-        for h, t, ok, p, s, page in rows
+        for h, t, ok, p, i, s, page in rows
     )
+    pages = {(r[0], r[1]): r[6] for r in rows}
+    pairs = ""
+    for hand in dict.fromkeys(r[0] for r in rows):
+        cells = "".join(
+            f"<td><b>{html.escape(t)}</b><br>"
+            + (
+                f"<iframe src={pages[hand, t]!r} width=480 height=400></iframe>"
+                if pages.get((hand, t))
+                else "no grasp"
+            )
+            + "</td>"
+            for t in SIDE_BY_SIDE
+        )
+        pairs += f"<tr><td>{html.escape(hand)}</td>{cells}</tr>"
     return (
         "<!doctype html><meta charset=utf-8><title>drograsp demo</title>"
-        "<style>body{font-family:sans-serif}td,th{padding:4px 10px}</style>"
+        "<style>body{font-family:sans-serif}td,th{padding:4px 10px;vertical-align:top}</style>"
         "<h1>drograsp demo</h1><table><tr><th>hand</th><th>instruction</th><th>holds</th>"
-        f"<th>part touched</th><th>time (s)</th><th>grasp</th></tr>{body}</table>"
+        "<th>part touched</th><th>meets its intent</th><th>time (s)</th><th>grasp</th></tr>"
+        f"{body}</table><h2>One part, two intents</h2><table>{pairs}</table>"
     )

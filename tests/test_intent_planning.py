@@ -1,0 +1,150 @@
+"""The model-based planner reads the instruction's intent: proposals shaped by each intent's
+definition (models/objects/intents.py) and candidates meeting it validated first."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+from scipy.spatial.transform import Rotation
+
+from models.hands import load_hand
+from models.objects import make_object
+from models.objects.intents import RULES, definition
+from planner.functional import CandidateResult, FunctionalPlanner, PlannerSettings
+from planner.intent import Criterion, IntentCheck, region_points
+
+
+@pytest.fixture(scope="module")
+def knife():
+    return make_object("knife", 0)
+
+
+@pytest.fixture(scope="module")
+def mug():
+    return make_object("mug", 0)
+
+
+def anchored(proposal) -> np.ndarray:
+    return proposal.anchors[np.isfinite(proposal.anchors).all(axis=1)]
+
+
+def tip_radius(hand_name: str) -> float:
+    hand = load_hand(hand_name)
+    return float(np.mean([hand.meta.fingertip(n).radius for n in hand.meta.anchor_fingers]))
+
+
+def test_liftup_proposals_face_down(hand_name, mug):
+    hand = load_hand(hand_name)
+    settings = PlannerSettings()
+    meaning = definition("mug", "Liftup", "handle")
+    proposals = FunctionalPlanner(hand_name, settings).propose(mug, "handle", meaning)
+    assert len(proposals) >= settings.max_proposals
+    normal = np.asarray(hand.meta.palm.normal, dtype=float)
+    half = settings.max_proposals // 2
+    # from above and by part alone in turn, in case those from above all slip
+    plain = FunctionalPlanner(hand_name, settings).propose(mug, "handle")
+    assert [p.wrist.tolist() for p in proposals[1 : 2 * half : 2]] == [
+        p.wrist.tolist() for p in plain[:half]
+    ]
+    for p in proposals[: 2 * half : 2]:
+        world = Rotation.from_quat(p.wrist[3:], scalar_first=True).apply(normal)
+        tilt = np.degrees(np.arccos(np.clip(-world[2] / np.linalg.norm(world), -1, 1)))
+        assert tilt <= settings.liftup_tilt_deg + 1.0
+    # by part alone the palm faces the handle from every side
+    sideways = FunctionalPlanner(hand_name, settings).propose(mug, "handle")
+    tilts = [Rotation.from_quat(p.wrist[3:], scalar_first=True).apply(normal)[2] for p in sideways]
+    assert max(tilts) > -0.5
+
+
+def test_handover_anchors_keep_clear_of_the_other_parts(hand_name, knife):
+    blade = knife.point_labels == knife.part_names.index("blade")
+    others = cKDTree(knife.points[~blade])
+    farthest = others.query(knife.points[blade])[0].max()
+    needed = min(RULES.handover.other_part_clearance + tip_radius(hand_name), farthest - 0.01)
+    meaning = definition("knife", "Handover", "blade")
+    half = PlannerSettings().max_proposals // 2
+    shaped = FunctionalPlanner(hand_name).propose(knife, "blade", meaning)[: 2 * half : 2]
+    plain = FunctionalPlanner(hand_name).propose(knife, "blade")
+    gaps = np.concatenate([others.query(anchored(p))[0] for p in shaped])
+    assert gaps.min() >= needed - 1e-9
+    # without the intent, anchors come nearer the handle
+    assert np.concatenate([others.query(anchored(p))[0] for p in plain]).min() < needed
+
+
+def test_use_anchors_keep_clear_of_the_working_parts(hand_name, knife):
+    meaning = definition("knife", "Use", "handle")
+    blade = cKDTree(np.vstack([region_points(knife, r) for r in meaning.working]))
+    proposals = FunctionalPlanner(hand_name).propose(knife, "handle", meaning)
+    gaps = np.concatenate([blade.query(anchored(p))[0] for p in proposals])
+    assert gaps.min() >= RULES.use.working_clearance + tip_radius(hand_name) - 1e-9
+
+
+def test_hold_proposes_power_grasps_in_turn_with_regular_ones(hand_name, mug):
+    settings = PlannerSettings()
+    proposals = FunctionalPlanner(hand_name, settings).propose(
+        mug, "body", definition("mug", "Hold", "body")
+    )
+    half = settings.max_proposals // 2
+    assert [p.kind for p in proposals[: 2 * half]] == ["palm", "row"] * half
+    assert all(p.palm_target is not None for p in proposals[: 2 * half : 2])
+
+
+def test_without_intent_awareness_proposals_are_by_part(hand_name, mug):
+    meaning = definition("mug", "Liftup", "handle")
+    off = PlannerSettings(intent_aware=False)
+    a = FunctionalPlanner(hand_name, off).propose(mug, "handle", meaning)
+    b = FunctionalPlanner(hand_name, off).propose(mug, "handle")
+    assert [p.wrist.tolist() for p in a] == [p.wrist.tolist() for p in b]
+
+
+def _check(ok: bool) -> IntentCheck:
+    crit = Criterion("palm_down", ok, 0.0, "<= 30 deg")
+    return IntentCheck("Liftup", ok, (crit,), "ok" if ok else "palm_down: tilted")
+
+
+def _fake(monkeypatch, intent_ok, holds) -> None:
+    """Every proposal solves; rank r meets its intent when intent_ok(r) and holds on the
+    instructed part when holds(r); better task metric for lower ranks."""
+    from planner import functional
+    from planner.grasp_program import SolveResult
+
+    solving = []  # the rank being solved: the intent check follows its solve
+
+    def fake_solve(self, program, obj, rank, proposal):
+        solving.append(rank)
+        solved = SolveResult(proposal.wrist, proposal.q, True, 0.001, 0.0, True, "fake", 0.0)
+        return CandidateResult(rank, proposal, solved, quality=0.5, task_quality=1 - rank / 100)
+
+    def fake_validate(self, program, obj, instruction, cand):
+        cand.grasp, cand.success, cand.part = object(), holds(cand.rank), instruction.part
+
+    monkeypatch.setattr(FunctionalPlanner, "_solve", fake_solve)
+    monkeypatch.setattr(FunctionalPlanner, "_validate", fake_validate)
+    monkeypatch.setattr(
+        functional, "check_configuration", lambda *args: _check(intent_ok(solving[-1]))
+    )
+
+
+def test_candidates_meeting_the_intent_are_validated_first(monkeypatch, mug):
+    _fake(monkeypatch, intent_ok=lambda r: r >= 2, holds=lambda r: True)
+    settings = PlannerSettings(solve_batch=4, max_proposals=8, sweep_after=None)
+    result = FunctionalPlanner("allegro", settings).plan(mug, "Liftup a mug by handle")
+    assert result.success and result.intent_ok
+    assert result.best.rank == 2 and result.best.order == 0
+
+
+def test_an_off_intent_grasp_is_returned_with_a_note_when_nothing_else_holds(monkeypatch, mug):
+    # only rank 0 holds, and it misses the intent; the intent-meeting ones slip
+    _fake(monkeypatch, intent_ok=lambda r: r != 0, holds=lambda r: r == 0)
+    settings = PlannerSettings(
+        solve_batch=4, max_proposals=8, max_candidates=8, sweep_after=None, intent_first=2
+    )
+    result = FunctionalPlanner("allegro", settings).plan(mug, "Liftup a mug by handle")
+    assert result.success and result.best.rank == 0 and result.intent_ok is False
+    assert any("Liftup definition" in n for n in result.notes)
+    # after the first two intent-meeting failures, rank 0 (best quality) is validated, then
+    # only candidates meeting the intent
+    validated = sorted((c for c in result.candidates if c.order is not None), key=lambda c: c.order)
+    order = [c.rank for c in validated]
+    assert order[:3] == [1, 2, 0] and 0 not in order[3:]
