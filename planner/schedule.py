@@ -62,8 +62,8 @@ def run_schedule(
     validated before the others for the first `intent_first` validations; after them the
     queue goes by quality alone, so that a part whose intent-meeting candidates slip still gets
     a grasp. Once a grasp has held on the part without meeting the intent, only candidates
-    meeting it are validated, and at most `intent_search` more proposals are solved: it is
-    returned unless one of them holds.
+    meeting it are validated, and at most `intent_search` more proposals are solved (None:
+    every proposal): it is returned unless one of them holds.
 
     Candidates without force closure (epsilon below `min_quality`) rarely hold: they wait until
     `gate_solves` proposals are solved, then queue with the rest by task metric. Once
@@ -114,7 +114,7 @@ def run_schedule(
         """Proposals still to solve: after a hold that missed the intent, `intent_search`
         more at most (the search for one meeting it is paid in solves)."""
         left = count - len(candidates)
-        if off_intent is None or s.validate_all:
+        if off_intent is None or s.validate_all or s.intent_search is None:
             return left
         return min(left, solved_at_off + s.intent_search - len(candidates))
 
