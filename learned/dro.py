@@ -5,12 +5,14 @@ the fingers open), so one network serves every hand. Both clouds go through a DG
 (static kNN graph on xyz, EdgeConv layers, per-point features); the instruction's sentence
 embedding scales and shifts both (FiLM); one cross-attention block each way lets hand and
 object features see each other (psi = phi + T(phi, other)); the kernel is an MLP on each pair
-[psi_R_i, psi_O_j], symmetric (one shared first layer), through softplus. Its first layer on
+[psi_R_i, psi_O_j] through softplus (not symmetrised: see `kernel`). Its first layer on
 a concatenation is a sum of two per-point projections, so those are computed per point and
-broadcast-added: the
-N x 512 pairs cost one small hidden layer each. The pair also gets the two points' distance in
-the input configuration (the open hand already sits at the grasp's wrist), a feature the
-network would otherwise have to rebuild from coordinates.
+broadcast-added: the N x 512 pairs cost one small hidden layer each. The pair also gets a
+geometric feature: the distance from where the hand point is predicted to go (its position in
+the input, where the open hand already sits at the grasp's wrist, plus an offset read from its
+features) to the object point. A one-hidden-layer kernel cannot compute a distance from two
+feature vectors well (runs without this feature stalled at 13 mm on near pairs), while this
+costs one cdist.
 
 Distances are predicted in centimetres inside (softplus output) and returned in metres.
 Weights are stored as safetensors with the config in the file's metadata.
@@ -51,7 +53,9 @@ class DROConfig:
     text_dim: int = TEXT_DIM
     input_scale: float = 10.0  # xyz (m) x 10: decimetres, inputs of order 1
     unit: float = 0.01  # metres per unit of the kernel's output: cm
-    input_distance: bool = True  # the pair's distance at the input pose as a kernel feature
+    # a kernel feature: the distance from where each hand point is predicted to go (its input
+    # position plus a learned offset) to the object point
+    input_distance: bool = True
 
     def to_json(self) -> str:
         return json.dumps(asdict(self))
@@ -149,8 +153,13 @@ class DRONet(nn.Module):
         nn.init.zeros_(self.film.bias)
         self.hand_cross = CrossBlock(f, cfg.heads)
         self.obj_cross = CrossBlock(f, cfg.heads)
-        self.pair = nn.Linear(f, cfg.kernel_hidden)
+        self.pair_r = nn.Linear(f, cfg.kernel_hidden)
+        self.pair_o = nn.Linear(f, cfg.kernel_hidden, bias=False)
         self.pair_d = nn.Parameter(torch.zeros(cfg.kernel_hidden))
+        # where each hand point is headed (cm from its input position), zero at the start
+        self.offset = nn.Linear(f, 3)
+        nn.init.zeros_(self.offset.weight)
+        nn.init.zeros_(self.offset.bias)
         self.pair_out = nn.Linear(cfg.kernel_hidden, 1)
         nn.init.constant_(self.pair_out.bias, 2.0)  # start near a few cm, not near zero
 
@@ -172,10 +181,14 @@ class DRONet(nn.Module):
         psi_o: torch.Tensor,
         input_distance: torch.Tensor | None = None,
     ) -> torch.Tensor:
-        """(B, N, M) distances (m) for every pair of the given point features. Both sides share
-        the first layer, so K(a, b) = K(b, a) by construction, at the cost of one pass (the
-        original averages two orders: twice the kernel, which dominates inference)."""
-        h = self.pair(psi_r)[:, :, None] + self.pair(psi_o)[:, None]
+        """(B, N, M) distances (m) for every pair of the given point features.
+
+        Hand and object points come from different encoders, so the kernel is not made
+        symmetric: a first layer shared by both sides (symmetric by construction) sees only
+        A psi_R + A psi_O, from which a distance, a function of their difference, cannot be
+        read, and the first interim run stalled at 13 mm; the original's symmetrisation by
+        averaging both orders would double the kernel, which dominates inference."""
+        h = self.pair_r(psi_r)[:, :, None] + self.pair_o(psi_o)[:, None]
         if input_distance is not None and self.cfg.input_distance:
             h = h + (input_distance / self.cfg.unit)[..., None] * self.pair_d
         z = self.pair_out(nn.functional.leaky_relu(h, 0.2))[..., 0]
@@ -200,6 +213,8 @@ class DRONet(nn.Module):
         if obj_index is not None:
             psi_o = _take(psi_o, obj_index)
             xyz_o = _take(xyz_o, obj_index)
+        if self.cfg.input_distance:
+            xyz_r = xyz_r + self.offset(psi_r) * self.cfg.unit
         return self.kernel(psi_r, psi_o, torch.cdist(xyz_r, xyz_o))
 
 
