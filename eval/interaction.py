@@ -178,7 +178,8 @@ def score(
     on_part = [(row == part).sum() >= 3 for row in lab]
     rot = Rotation.from_quat(wrists[:, 3:], scalar_first=True)
     palms = wrists[:, :3] + rot.apply(palm_centre)
-    outside = [not bool(v) for v in mesh.contains(palms)]
+    with np.errstate(divide="ignore", invalid="ignore"):  # trimesh's ray test on edge hits
+        outside = [not bool(v) for v in mesh.contains(palms)]
     return [bool(v) for v in on_part], outside
 
 

@@ -65,6 +65,9 @@ class InteractionConfig:
     guidance: float = 2.0  # classifier-free guidance scale (1 = conditional only)
     text_dropout: float = 0.15  # share of training samples with the text dropped
     anchor_weight: float = 1.0  # loss weight of the anchor dimensions vs the wrist's
+    # each block's norms scaled and shifted by (time + object, hand and text summary), so the
+    # instruction acts at every layer, not only through one token (configs without it: off)
+    film: bool = True
 
     def levels(self, which: str) -> tuple[LevelConfig, LevelConfig]:
         raw = self.object_levels if which == "object" else self.hand_levels
@@ -78,6 +81,7 @@ class InteractionConfig:
     def from_json(cls, data: dict[str, Any]) -> InteractionConfig:
         known = {f for f in cls.__dataclass_fields__}
         kw = {k: v for k, v in data.items() if k in known}
+        kw.setdefault("film", False)  # written before the option existed
         for key in ("object_levels", "hand_levels"):
             if key in kw:
                 kw[key] = tuple((int(c), int(k), tuple(int(w) for w in ws)) for c, k, ws in kw[key])
@@ -223,9 +227,13 @@ class Block(nn.Module):
     The condition's keys and values are projected once per condition (`memory`) and reused
     at every denoising step: at sampling that is most of the work saved."""
 
-    def __init__(self, d: int, heads: int, ff: int):
+    def __init__(self, d: int, heads: int, ff: int, film: bool = False):
         super().__init__()
         self.heads = heads
+        self.film = nn.Linear(d, 4 * d) if film else None
+        if self.film is not None:  # starts as the identity
+            nn.init.zeros_(self.film.weight)
+            nn.init.zeros_(self.film.bias)
         self.n1, self.n2, self.n3 = nn.LayerNorm(d), nn.LayerNorm(d), nn.LayerNorm(d)
         self.self_attn = nn.MultiheadAttention(d, heads, batch_first=True)
         self.cross = nn.MultiheadAttention(d, heads, batch_first=True)
@@ -243,8 +251,15 @@ class Block(nn.Module):
         v = F.linear(cond, w[2 * d :], b[2 * d :])
         return self._split(k), self._split(v)
 
-    def forward(self, x: torch.Tensor, memory: tuple[torch.Tensor, torch.Tensor]) -> torch.Tensor:
+    def forward(
+        self, x: torch.Tensor, memory: tuple[torch.Tensor, torch.Tensor], emb: torch.Tensor
+    ) -> torch.Tensor:
+        mods = None
+        if self.film is not None:
+            mods = self.film(emb)[:, None].chunk(4, dim=-1)
         h = self.n1(x)
+        if mods is not None:
+            h = h * (1 + mods[0]) + mods[1]
         x = x + self.self_attn(h, h, h, need_weights=False)[0]
         d = x.shape[-1]
         w, b = self.cross.in_proj_weight, self.cross.in_proj_bias
@@ -252,7 +267,10 @@ class Block(nn.Module):
         att = F.scaled_dot_product_attention(q, *memory)
         att = att.transpose(1, 2).reshape(x.shape)
         x = x + self.cross.out_proj(att)
-        return x + self.ff(self.n3(x))
+        h = self.n3(x)
+        if mods is not None:
+            h = h * (1 + mods[2]) + mods[3]
+        return x + self.ff(h)
 
 
 @dataclass
@@ -300,7 +318,7 @@ class InteractionNet(nn.Module):
         self.wrist_in = nn.Linear(9, d)
         self.anchor_in = nn.Linear(3, d)
         self.slot = nn.Parameter(torch.randn(5, d) * 0.02)
-        self.blocks = nn.ModuleList([Block(d, c.heads, c.ff) for _ in range(c.layers)])
+        self.blocks = nn.ModuleList([Block(d, c.heads, c.ff, c.film) for _ in range(c.layers)])
         self.out_norm = nn.LayerNorm(d)
         self.wrist_out = nn.Linear(d, 9)
         self.anchor_out = nn.Linear(d, 3)
@@ -349,7 +367,7 @@ class InteractionNet(nn.Module):
         h = tokens + self.slot[None] + emb[:, None]
         memory = cond.memory or self.memory(cond)
         for block, mem in zip(self.blocks, memory, strict=True):
-            h = block(h, mem)
+            h = block(h, mem, emb)
         h = self.out_norm(h)
         return torch.cat([self.wrist_out(h[:, 0]), self.anchor_out(h[:, 1:]).flatten(1)], dim=1)
 
