@@ -58,6 +58,9 @@ class TrainSettings:
     weight_decay: float = 1e-4
     ema: float = 0.995
     canonical_share: float = 0.3  # share of steps that keep the dataset's canonical instruction
+    # rows drawn with weight count(instruction) ** -balance: 0 uniform over grasps, 1 uniform
+    # over instructions (rare ones, e.g. 10 pump grasps beside 157 neck grasps, seen as often)
+    balance: float = 0.0
     samples_per_object: int = 4  # cached 2048-point samples per object
     checkpoint_minutes: float = 3.0
     threads: int = 1
@@ -186,6 +189,9 @@ class Batcher:
         instr = [meta["instructions"][i] for i in a["instruction"][rows]]
         self.instr_names = sorted(set(instr))
         self.instr_index = np.array([self.instr_names.index(t) for t in instr])
+        counts = np.bincount(self.instr_index, minlength=len(self.instr_names))
+        weights = counts[self.instr_index].astype(np.float64) ** -settings.balance
+        self.row_weights = weights / weights.sum()
         # paraphrases per instruction: index 0 is the canonical text
         self.texts: list[list[str]] = []
         for t in self.instr_names:
@@ -427,7 +433,7 @@ def train(
         lr = settings.lr * min(1.0, (step + 1) / settings.warmup)
         for g in opt.param_groups:
             g["lr"] = lr
-        picks = rng.integers(0, len(batcher), size=settings.batch)
+        picks = rng.choice(len(batcher), size=settings.batch, p=batcher.row_weights)
         batch = batcher.make(picks, rng, pyrng)
         loss = batch_loss(model, batcher, batch, settings.repeats, config.text_dropout, gen)
         opt.zero_grad(set_to_none=True)

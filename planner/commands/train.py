@@ -40,6 +40,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     i.add_argument("--layers", type=positive_int, default=None, help="denoiser layers")
     i.add_argument(
+        "--balance",
+        type=float,
+        default=0.0,
+        help="draw grasps with weight count(instruction)^-BALANCE: 0 uniform over grasps "
+        "(default), 1 uniform over instructions",
+    )
+    i.add_argument(
         "--install",
         action="store_true",
         help="copy the final weights to learned/weights/ (the shipped model)",
@@ -79,6 +86,7 @@ def run_interaction(args: argparse.Namespace) -> int:
         batch=args.batch,
         threads=args.threads,
         checkpoint_minutes=args.checkpoint_minutes,
+        balance=args.balance,
     )
     result = train(args.data, args.out, settings, config, install=args.install)
     val = "n/a" if result.val_loss is None else f"{result.val_loss:.4f}"
