@@ -13,6 +13,8 @@ Per hand, on rows of the split (a fixed random sample per hand):
   joint error vs the dataset grasp (mean |q - q_grasp| in degrees over the hand's joints) and
   first-try validated success (the first solve, pregrasp, squeeze and MuJoCo validation as
   the planner runs them, `--protocol`, default paper);
+- the network's own guess of where each hand point goes (input + learned offset, the kernel's
+  distance feature), median error over the `near` points, beside multilateration's;
 - timings: network forward (one thread), the whole prediction, the solve.
 
 Leave-one-hand-out: train with `--hands` on two hands (learned.train_dro) and evaluate its
@@ -49,6 +51,7 @@ class HandRecord:
     d_error_mm: list[float] = field(default_factory=list)  # per row
     point_error_near_mm: list[float] = field(default_factory=list)  # per point, pooled
     point_error_all_mm: list[float] = field(default_factory=list)
+    headed_error_near_mm: list[float] = field(default_factory=list)
     joint_error_deg: list[float] = field(default_factory=list)
     solved_ok: list[bool] = field(default_factory=list)
     first_try_success: list[bool] = field(default_factory=list)
@@ -69,6 +72,7 @@ class HandRecord:
             "d_error_mm": mean(self.d_error_mm),
             "point_error_near_median_mm": med(self.point_error_near_mm),
             "point_error_all_median_mm": med(self.point_error_all_mm),
+            "headed_error_near_median_mm": med(self.headed_error_near_mm),
             "validated_rows": len(self.first_try_success),
             "joint_error_deg": mean(self.joint_error_deg),
             "solve_ok": mean(self.solved_ok),
@@ -114,6 +118,8 @@ def evaluate(
             err = np.linalg.norm(pred.targets - truth.numpy(), axis=1) * 1000
             rec.point_error_all_mm.extend(err.tolist())
             rec.point_error_near_mm.extend(err[close.any(axis=1)].tolist())
+            headed = np.linalg.norm(pred.headed - truth.numpy(), axis=1) * 1000
+            rec.headed_error_near_mm.extend(headed[close.any(axis=1)].tolist())
             if n_done < validate:
                 _solve_and_validate(rec, hand, data, r, pred, protocol, anchors_only)
     meta = dict(ckpt.meta)
@@ -170,6 +176,7 @@ def _table(result: dict) -> str:
         ("D err mm", "d_error_mm", "{:.1f}"),
         ("pt err near mm", "point_error_near_median_mm", "{:.1f}"),
         ("pt err all mm", "point_error_all_median_mm", "{:.1f}"),
+        ("headed err near mm", "headed_error_near_median_mm", "{:.1f}"),
         ("validated", "validated_rows", "{}"),
         ("joint err deg", "joint_error_deg", "{:.1f}"),
         ("solve ok", "solve_ok", "{:.0%}"),
@@ -190,6 +197,8 @@ def _table(result: dict) -> str:
     head = (
         f"split {result['split']}, weights {result['weights']} (trained on {result['trained_on']})"
     )
+    if result["anchors_only"]:
+        head += "; Drake WITHOUT the D(R,O) targets (anchors and wrist only)"
     return head + "\n" + "\n".join(lines)
 
 

@@ -201,10 +201,13 @@ class DRONet(nn.Module):
         text: torch.Tensor,
         hand_index: torch.Tensor | None = None,
         obj_index: torch.Tensor | None = None,
-    ) -> torch.Tensor:
+        return_headed: bool = False,
+    ) -> torch.Tensor | tuple[torch.Tensor, torch.Tensor]:
         """hand_xyz (B, N, 3) m, obj (B, M, 4) xyz + Omega, text (B, 384) -> D (B, N', M') m
         for the hand points `hand_index` (B, N') and object points `obj_index` (B, M')
-        (default: all): the encoders always see whole clouds, only the kernel is subsampled."""
+        (default: all): the encoders always see whole clouds, only the kernel is subsampled.
+        With `return_headed`, also where each of those hand points is headed (B, N', 3): the
+        input position plus the learned offset behind the kernel's distance feature."""
         psi_r, psi_o = self.encode(hand_xyz, obj, text)
         xyz_r, xyz_o = hand_xyz, obj[..., :3]
         if hand_index is not None:
@@ -215,7 +218,8 @@ class DRONet(nn.Module):
             xyz_o = _take(xyz_o, obj_index)
         if self.cfg.input_distance:
             xyz_r = xyz_r + self.offset(psi_r) * self.cfg.unit
-        return self.kernel(psi_r, psi_o, torch.cdist(xyz_r, xyz_o))
+        d = self.kernel(psi_r, psi_o, torch.cdist(xyz_r, xyz_o))
+        return (d, xyz_r) if return_headed else d
 
 
 def _take(x: torch.Tensor, idx: torch.Tensor) -> torch.Tensor:
@@ -331,6 +335,7 @@ class Prediction:
     distances: np.ndarray  # (512, 512) m, hand point x object input point
     targets: np.ndarray  # (512, 3) every hand point after multilateration + Kabsch
     closeness: np.ndarray  # (512,) confidence of each target (see `closeness`)
+    headed: np.ndarray  # (512, 3) the network's own guess of each point (`DRONet.forward`)
     forward_time: float  # s, network forward only
     total_time: float  # s, hand input + forward + multilateration + Kabsch
 
@@ -352,7 +357,7 @@ def predict(
     obj = torch.as_tensor(np.asarray(obj_features, dtype=np.float32))[None]
     text = torch.as_tensor(np.asarray(text_embedding, dtype=np.float32)).reshape(1, -1)
     t0 = time.perf_counter()
-    d = net(hand_in, obj, text)
+    d, headed = net(hand_in, obj, text, return_headed=True)
     forward = time.perf_counter() - t0
     placed = place_hand(
         [hand.name], obj[..., :3].double(), d.double(), np.arange(512), neighbours, hand_in.double()
@@ -361,6 +366,7 @@ def predict(
         distances=d[0].numpy(),
         targets=placed[0].numpy(),
         closeness=closeness(d[0].min(dim=-1).values).double().numpy(),
+        headed=headed[0].double().numpy(),
         forward_time=forward,
         total_time=time.perf_counter() - start,
     )

@@ -217,3 +217,12 @@ def test_point_weights_of_the_wrong_shape_are_refused():
     )
     with pytest.raises(PlanningError, match="point_weights"):
         program.solve(targets)
+
+
+def test_shipped_weights_load_when_present():
+    from learned.dro import WEIGHTS
+
+    if not WEIGHTS.is_file():
+        pytest.skip("no shipped D(R,O) weights")
+    ckpt = load_weights()
+    assert ckpt.meta["steps"] > 0 and set(ckpt.meta["hands"]) == set(available_hands())
