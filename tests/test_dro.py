@@ -226,3 +226,13 @@ def test_shipped_weights_load_when_present():
         pytest.skip("no shipped D(R,O) weights")
     ckpt = load_weights()
     assert ckpt.meta["steps"] > 0 and set(ckpt.meta["hands"]) == set(available_hands())
+
+
+def test_cli_train_dro_options_reach_the_config():
+    from planner.cli import build_parser
+
+    argv = ["train", "dro", "--data", "D", "--out", "O", "--epochs", "2", "--hands", "leap"]
+    args = build_parser(argv).parse_args(argv)
+    cfg = train_dro.config_from_args(args)
+    assert (cfg.data, cfg.out, cfg.epochs, cfg.hands) == ("D", "O", 2, ("leap",))
+    assert cfg.batch == train_dro.TrainConfig("", "").batch  # left out: the config's default
