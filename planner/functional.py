@@ -132,6 +132,9 @@ class PlannerSettings:
         ("Hold", "palm_weight", 200.0),
         ("Liftup", "wrist_rotation_weight", 1.0),
     )
+    # Liftup: the grasp program keeps the hand above a table slab under the object (the
+    # definition: no hand point below the object's lowest point); the table is no contact
+    liftup_table: bool = True
     program: ProgramSettings = field(default_factory=ProgramSettings)
 
     def __post_init__(self) -> None:
@@ -179,8 +182,11 @@ class Proposal:
     # object's centre of mass: the solve order, best first (set with proposal_order="anchors")
     anchor_quality: float = -1.0
     # "row": thumb against a row of the other anchor fingers; "pinch": thumb and the next
-    # two anchor fingers, the last one free
+    # two anchor fingers, the last one free; "palm": a power grasp, palm first (Hold)
     kind: str = "row"
+    # placed for the instruction's intent (not by part alone): solved with the intent's
+    # program settings (`intent_program`) and, for Liftup, above a table
+    shaped: bool = False
 
 
 @dataclass
@@ -313,6 +319,8 @@ class _Shape:
     # proposals from this shape and by part alone in turn (FunctionalPlanner.propose): where
     # the intent's proposals all slip, the part still gets a grasp
     mix: bool = False
+    # the regular and pinch proposals of this shape differ from those by part alone
+    shaped_rows: bool = False
 
 
 class HandGeometry:
@@ -419,6 +427,8 @@ class FunctionalPlanner:
                             *frame, pinch_spacing, tree, with_palm, shape.toward_palm, pinch=True
                         )
                     )
+            for proposal in rows + pinch:
+                proposal.shaped = shape.shaped_rows
             return rows, pinch, palm
 
         rows, pinch, palm = build(shape)
@@ -502,13 +512,13 @@ class FunctionalPlanner:
         if intent.intent == "Use" and intent.working:
             working = np.vstack([region_points(obj, r) for r in intent.working])
             away = clear_of(working, RULES.use.working_clearance + tip)
-            return _Shape(away, shape.frames)
+            return _Shape(away, shape.frames, shaped_rows=True)
         if intent.intent == "Handover":
             others = obj.points[~mask]
             away = clear_of(others, RULES.handover.other_part_clearance + tip)
             free = np.isin(obj.point_labels, [obj.part_names.index(p) for p in intent.receiver])
             if not free.any():
-                return _Shape(away, shape.frames, mix=True)
+                return _Shape(away, shape.frames, mix=True, shaped_rows=True)
             held = pts.mean(axis=0)
             toward = obj.points[free].mean(axis=0) - held
             toward /= np.linalg.norm(toward)
@@ -516,14 +526,14 @@ class FunctionalPlanner:
             far = pts[away][np.argmin(pts[away] @ toward)]
             target = held + ((far - held) @ toward) * toward
             frames = [f for f in shape.frames if f[0] @ toward >= -0.2] or shape.frames
-            return _Shape(away, frames, target=target, mix=True)
+            return _Shape(away, frames, target=target, mix=True, shaped_rows=True)
         if intent.intent == "Liftup":
             height = pts[:, 2]
             if np.ptp(height) > self.settings.liftup_reach:
                 upper = away & (height >= height.max() - self.settings.liftup_reach)
                 away = upper if upper.sum() >= 8 else away
             frames = self._liftup_frames(axes[0], axes[1])
-            return _Shape(away, frames, toward_palm=0.5, mix=True)
+            return _Shape(away, frames, toward_palm=0.5, mix=True, shaped_rows=True)
         if intent.intent == "Hold":
             offsets = pts - pts.mean(axis=0)
             width = max(np.ptp(offsets @ axes[1]), np.ptp(offsets @ axes[2]))
@@ -590,6 +600,7 @@ class FunctionalPlanner:
             rounded(palm_clear),
             rounded(palm_target),
             kind="palm",
+            shaped=True,
         )
 
     def _proposal(
@@ -689,19 +700,22 @@ class FunctionalPlanner:
             )
         start = time.perf_counter()
         meaning = intent_definition(obj, instruction) if self.settings.intent_aware else None
-        program_settings = self.settings.program
-        if meaning is not None:
-            changes = {k: v for i, k, v in self.settings.intent_program if i == meaning.intent}
-            program_settings = replace(program_settings, **changes)
-        program = grasp_program(self.hand, obj.collision_pieces(), program_settings)
+        program = grasp_program(self.hand, obj.collision_pieces(), self.settings.program)
         build = time.perf_counter() - start
         proposals = self.propose(obj, part, meaning)
         propose_time = time.perf_counter() - start - build
+        shaped_program = program
+        if meaning is not None and any(p.shaped for p in proposals):
+            shaped_program = self._intent_program(obj, meaning)
+            build = time.perf_counter() - start - propose_time
         # Solved a batch at a time, each batch validated best first (planner.schedule), so that
         # good grasps are found without solving every proposal.
 
+        def program_of(rank: int) -> GraspProgram:
+            return shaped_program if proposals[rank].shaped else program
+
         def solve(rank: int) -> CandidateResult:
-            cand = self._solve(program, obj, rank, proposals[rank])
+            cand = self._solve(program_of(rank), obj, rank, proposals[rank])
             if rank == 0:
                 cand.times.update(build=build, propose=propose_time)
             if meaning is not None and cand.solve.ok:
@@ -713,7 +727,7 @@ class FunctionalPlanner:
             return cand
 
         def validate(cand: CandidateResult) -> None:
-            self._validate(program, obj, instruction, cand)
+            self._validate(program_of(cand.rank), obj, instruction, cand)
 
         scheduled = run_schedule(len(proposals), solve, validate, part, self.settings)
         candidates = scheduled.candidates
@@ -733,6 +747,15 @@ class FunctionalPlanner:
             return PlanResult(instruction, self.hand.name, fallback.grasp, candidates, notes)
         return PlanResult(instruction, self.hand.name, None, candidates, notes)
 
+    def _intent_program(self, obj: ObjectModel, meaning: Definition) -> GraspProgram:
+        """The grasp program for proposals placed for the intent: its `intent_program`
+        settings and, for Liftup, a table under the object (`liftup_table`)."""
+        changes = {k: v for i, k, v in self.settings.intent_program if i == meaning.intent}
+        pieces = list(obj.collision_pieces())
+        if meaning.intent == "Liftup" and self.settings.liftup_table:
+            pieces.append(table_under(obj))
+        return grasp_program(self.hand, pieces, replace(self.settings.program, **changes))
+
     def _solve(self, program, obj, rank, proposal) -> CandidateResult:
         """Solve one proposal and score its contacts (epsilon and task quality at the grasp)."""
         solved = program.solve(
@@ -750,6 +773,10 @@ class FunctionalPlanner:
             points, inward = program.contacts(
                 solved.wrist, solved.q, self.settings.contact_distance
             )
+            if len(program.obj.pieces) > len(obj.collision_pieces()):  # a table: not the object
+                top = float(program.obj.pieces[-1].vertices[:, 2].max())
+                on_table = (points[:, 2] <= top + 1e-4) & (inward[:, 2] < -0.9)
+                points, inward = points[~on_table], inward[~on_table]
             quality = contact_quality(points, inward, obj.points.mean(axis=0))
             cand.quality, cand.task_quality = rounded(quality.epsilon), rounded(quality.task)
             cand.times["quality"] = time.perf_counter() - t0
@@ -765,6 +792,20 @@ class FunctionalPlanner:
         cand.grasp, cand.success, cand.part = done.grasp, done.success, done.part
         cand.validation = done.validation
         cand.times.update(done.times)
+
+
+TABLE_GAP = 0.001  # m: the table's top above the object's lowest point (hand 1.5 mm above)
+
+
+def table_under(obj: ObjectModel) -> np.ndarray:
+    """The 8 corners of a 60 x 60 x 2 cm slab whose top is `TABLE_GAP` above the object's
+    lowest point, centred under it: a collision piece for Liftup's grasp program."""
+    src = obj.mesh.vertices if obj.mesh is not None else obj.points  # as planner.intent
+    low, high = src.min(axis=0), src.max(axis=0)
+    cx, cy = (low[:2] + high[:2]) / 2
+    top = low[2] + TABLE_GAP
+    corners = np.array([[x, y, z] for x in (-0.3, 0.3) for y in (-0.3, 0.3) for z in (-0.02, 0)])
+    return rounded(corners + [cx, cy, top])
 
 
 def _alternate(a: list[Proposal], b: list[Proposal]) -> list[Proposal]:

@@ -148,3 +148,18 @@ def test_an_off_intent_grasp_is_returned_with_a_note_when_nothing_else_holds(mon
     validated = sorted((c for c in result.candidates if c.order is not None), key=lambda c: c.order)
     order = [c.rank for c in validated]
     assert order[:3] == [1, 2, 0] and 0 not in order[3:]
+
+
+def test_liftup_plans_the_shaped_proposals_above_a_table(knife):
+    from planner.functional import TABLE_GAP, table_under
+
+    slab = table_under(knife)
+    bottom = knife.mesh.vertices[:, 2].min()
+    assert np.isclose(slab[:, 2].max(), bottom + TABLE_GAP)
+    assert slab[:, 0].min() < knife.mesh.vertices[:, 0].min()
+    assert slab[:, 0].max() > knife.mesh.vertices[:, 0].max()
+    proposals = FunctionalPlanner("allegro").propose(
+        knife, "handle", definition("knife", "Liftup", "handle")
+    )
+    shaped = [p.shaped for p in proposals]
+    assert any(shaped) and not all(shaped)
