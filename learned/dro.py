@@ -155,7 +155,9 @@ class DRONet(nn.Module):
         self.obj_cross = CrossBlock(f, cfg.heads)
         self.pair_r = nn.Linear(f, cfg.kernel_hidden)
         self.pair_o = nn.Linear(f, cfg.kernel_hidden, bias=False)
-        self.pair_d = nn.Parameter(torch.zeros(cfg.kernel_hidden))
+        # not zero: with both this and the offset head at zero, neither gets a gradient to
+        # start from (the interim weights were trained so: their offsets stayed small)
+        self.pair_d = nn.Parameter(0.1 * torch.randn(cfg.kernel_hidden))
         # where each hand point is headed (cm from its input position), zero at the start
         self.offset = nn.Linear(f, 3)
         nn.init.zeros_(self.offset.weight)
