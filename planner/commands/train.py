@@ -42,9 +42,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     i.add_argument(
         "--balance",
         type=float,
-        default=0.0,
-        help="draw grasps with weight count(instruction)^-BALANCE: 0 uniform over grasps "
-        "(default), 1 uniform over instructions",
+        default=0.5,
+        help="draw grasps with weight count(instruction)^-BALANCE: 0 uniform over grasps, "
+        "1 uniform over instructions (default 0.5)",
     )
     i.add_argument(
         "--install",
