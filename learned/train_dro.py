@@ -163,7 +163,7 @@ def prepare(
         if unknown:
             raise DatasetError(f"hands {sorted(unknown)} not in the dataset ({meta['hands']})")
         keep &= np.isin(a["hand"], [meta["hands"].index(h) for h in hands])
-    if "intent_ok" in a:  # newer datasets: only grasps that satisfy their intent
+    if "intent_ok" in a:  # drop grasps known to miss their intent (0); unknown (-1) stays
         keep &= a["intent_ok"].astype(bool)
     rows = np.flatnonzero(keep)[:max_rows]
     if len(rows) == 0:
