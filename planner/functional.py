@@ -538,7 +538,10 @@ class FunctionalPlanner:
             offsets = pts - pts.mean(axis=0)
             width = max(np.ptp(offsets @ axes[1]), np.ptp(offsets @ axes[2]))
             # palm contact is asked where the part is as wide as the Hold rule says
-            return replace(shape, palm_first=bool(width >= RULES.hold.palm_min_width))
+            # every Hold proposal is solved with Hold's program (the palm pulled onto its target)
+            return replace(
+                shape, palm_first=bool(width >= RULES.hold.palm_min_width), shaped_rows=True
+            )
         return shape
 
     def _ordered(self, proposals: list[Proposal], com: np.ndarray) -> list[Proposal]:
