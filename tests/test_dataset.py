@@ -373,3 +373,26 @@ def test_refresh_needs_a_generated_dataset(tiny, tmp_path):
         refresh_dataset(tmp_path, ["mug"])
     code = cli.main(["dataset", "refresh", str(tmp_path), "--categories", "mug"])
     assert code == 2
+
+
+def test_intent_verdicts_become_the_intent_ok_column():
+    """A grasp's metrics["intent_ok"] is the row's intent_ok: 1 met, 0 missed, -1 not checked
+    (records made before intent checks, and every row of a drograsp-grasps/2 dataset)."""
+    from planner.batch.dataset import _row
+
+    job = {"object": {"category": "mug", "seed": 0}, "instruction": "Liftup a mug by handle"}
+    job |= {"hand": "allegro", "variant": 0}
+    grasp = {
+        "wrist_pos": [0.0, 0.0, 0.1],
+        "wrist_quat": [1.0, 0.0, 0.0, 0.0],
+        "grasp": [0.0] * 16,
+        "pregrasp": [0.0] * 16,
+        "squeeze": [0.0] * 16,
+        "anchors": [[0.0, 0.0, 0.0]] * 4,
+    }
+    for metrics, expected in (({"intent_ok": True}, 1), ({"intent_ok": False}, 0), ({}, -1)):
+        record = {"job": job, "grasp": grasp | {"metrics": metrics}, "part_voted": "handle"}
+        assert _row(record)["intent_ok"] == expected
+    old = load_split(SHIPPED, "test")
+    assert old.meta["format"] == "drograsp-grasps/2" and (old.arrays["intent_ok"] == -1).all()
+    assert GraspDataset(SHIPPED, "test")[0]["intent_ok"] == -1
