@@ -496,8 +496,9 @@ class FunctionalPlanner:
         the part's farthest point from them, where it is smaller: a bottle's neck), toward the
         part's end away from the receiver's parts, and the palm on the side away from them.
         Liftup: the palm facing down, anchors within `liftup_reach` below the part's top and
-        on the part's upper side. Hold: as by part (its palm contact and force closure are
-        checked on the solved candidates)."""
+        on the part's upper side. Hold: power grasps with the palm on the part (where it is
+        as wide as the Hold rule asks) beside the regular proposals, all solved with Hold's
+        program."""
         pts = obj.points[mask]
         tip = float(np.mean(self.geometry.tip_radii))
         away = shape.away
@@ -537,8 +538,8 @@ class FunctionalPlanner:
         if intent.intent == "Hold":
             offsets = pts - pts.mean(axis=0)
             width = max(np.ptp(offsets @ axes[1]), np.ptp(offsets @ axes[2]))
-            # palm contact is asked where the part is as wide as the Hold rule says
-            # every Hold proposal is solved with Hold's program (the palm pulled onto its target)
+            # palm contact is asked where the part is as wide as the Hold rule says; every Hold
+            # proposal is solved with Hold's program (the palm pulled onto its target)
             return replace(
                 shape, palm_first=bool(width >= RULES.hold.palm_min_width), shaped_rows=True
             )
@@ -707,9 +708,9 @@ class FunctionalPlanner:
         build = time.perf_counter() - start
         proposals = self.propose(obj, part, meaning)
         propose_time = time.perf_counter() - start - build
-        shaped_program = program
+        shaped_program, table_top = program, None
         if meaning is not None and any(p.shaped for p in proposals):
-            shaped_program = self._intent_program(obj, meaning)
+            shaped_program, table_top = self._intent_program(obj, meaning)
             build = time.perf_counter() - start - propose_time
         # Solved a batch at a time, each batch validated best first (planner.schedule), so that
         # good grasps are found without solving every proposal.
@@ -718,7 +719,9 @@ class FunctionalPlanner:
             return shaped_program if proposals[rank].shaped else program
 
         def solve(rank: int) -> CandidateResult:
-            cand = self._solve(program_of(rank), obj, rank, proposals[rank])
+            proposal = proposals[rank]
+            top = table_top if proposal.shaped else None
+            cand = self._solve(program_of(rank), obj, rank, proposal, top)
             if rank == 0:
                 cand.times.update(build=build, propose=propose_time)
             if meaning is not None and cand.solve.ok:
@@ -750,16 +753,21 @@ class FunctionalPlanner:
             return PlanResult(instruction, self.hand.name, fallback.grasp, candidates, notes)
         return PlanResult(instruction, self.hand.name, None, candidates, notes)
 
-    def _intent_program(self, obj: ObjectModel, meaning: Definition) -> GraspProgram:
-        """The grasp program for proposals placed for the intent: its `intent_program`
-        settings and, for Liftup, a table under the object (`liftup_table`)."""
+    def _intent_program(
+        self, obj: ObjectModel, meaning: Definition
+    ) -> tuple[GraspProgram, float | None]:
+        """The grasp program for proposals placed for the intent (its `intent_program`
+        settings and, for Liftup, a table under the object: `liftup_table`) and the table's
+        top height (None: no table)."""
         changes = {k: v for i, k, v in self.settings.intent_program if i == meaning.intent}
-        pieces = list(obj.collision_pieces())
+        pieces, top = list(obj.collision_pieces()), None
         if meaning.intent == "Liftup" and self.settings.liftup_table:
-            pieces.append(table_under(obj))
-        return grasp_program(self.hand, pieces, replace(self.settings.program, **changes))
+            table = table_under(obj)
+            pieces.append(table)
+            top = float(table[:, 2].max())
+        return grasp_program(self.hand, pieces, replace(self.settings.program, **changes)), top
 
-    def _solve(self, program, obj, rank, proposal) -> CandidateResult:
+    def _solve(self, program, obj, rank, proposal, table_top=None) -> CandidateResult:
         """Solve one proposal and score its contacts (epsilon and task quality at the grasp)."""
         solved = program.solve(
             GraspTargets(
@@ -776,9 +784,8 @@ class FunctionalPlanner:
             points, inward = program.contacts(
                 solved.wrist, solved.q, self.settings.contact_distance
             )
-            if len(program.obj.pieces) > len(obj.collision_pieces()):  # a table: not the object
-                top = float(program.obj.pieces[-1].vertices[:, 2].max())
-                on_table = (points[:, 2] <= top + 1e-4) & (inward[:, 2] < -0.9)
+            if table_top is not None:  # the table is no contact with the object
+                on_table = (points[:, 2] <= table_top + 1e-4) & (inward[:, 2] < -0.9)
                 points, inward = points[~on_table], inward[~on_table]
             quality = contact_quality(points, inward, obj.points.mean(axis=0))
             cand.quality, cand.task_quality = rounded(quality.epsilon), rounded(quality.task)

@@ -111,7 +111,7 @@ def _fake(monkeypatch, intent_ok, holds) -> None:
 
     solving = []  # the rank being solved: the intent check follows its solve
 
-    def fake_solve(self, program, obj, rank, proposal):
+    def fake_solve(self, program, obj, rank, proposal, table_top=None):
         solving.append(rank)
         solved = SolveResult(proposal.wrist, proposal.q, True, 0.001, 0.0, True, "fake", 0.0)
         return CandidateResult(rank, proposal, solved, quality=0.5, task_quality=1 - rank / 100)

@@ -280,7 +280,7 @@ def _fake_solves_and_verdicts(monkeypatch, quality: float, task, holder: int) ->
     from planner.functional import CandidateResult
     from planner.grasp_program import SolveResult
 
-    def fake_solve(self, program, obj, rank, proposal):
+    def fake_solve(self, program, obj, rank, proposal, table_top=None):
         solved = SolveResult(proposal.wrist, proposal.q, True, 0.001, 0.0, True, "fake", 0.0)
         return CandidateResult(rank, proposal, solved, quality=quality, task_quality=task(rank))
 
