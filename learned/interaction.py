@@ -33,7 +33,7 @@ from torch.nn import functional as F
 
 from learned.pointnet import Grouping, LevelConfig, PointNet2Encoder, grouping
 from learned.weights import WeightsError, load_weights, save_weights
-from models.errors import ObjectError
+from models.errors import DrograspError, ObjectError
 
 SCALE = 10.0  # network units per metre
 X_DIM = 21  # translation 3 + rotation 6 + anchors 12
@@ -524,7 +524,7 @@ class InteractionModel:
         from learned.text import encode
 
         if isinstance(n, bool) or not isinstance(n, int | np.integer) or n < 1:
-            raise ValueError(f"n must be a positive integer, got {n!r}")
+            raise SamplingError(f"n must be a positive integer, got {n!r}")
         pts = check_cloud(cloud)
         vec = encode([text])[0]
         prepared = prepare_cloud(pts, self.config)
@@ -533,6 +533,11 @@ class InteractionModel:
         if snap:
             anchors = snap_to_cloud(anchors, pts)
         return wrists, anchors
+
+
+class SamplingError(DrograspError, ValueError):
+    """A sampling argument out of range (a user's error: the CLI prints it without a
+    traceback)."""
 
 
 def snap_to_cloud(anchors: np.ndarray, points: np.ndarray) -> np.ndarray:
