@@ -4,8 +4,8 @@ and squeeze, and the anchors.
 `show_live` serves the scene on localhost with a phase slider; `write_html` writes a
 self-contained page (Meshcat's StaticHtml) in which the three phases play as an animation, with
 a caption (hand, instruction, verdict, part, phases). Meshcat always runs a web server: it is
-bound to localhost only, never to every interface, and the pages of one process share one
-server, which announces nothing (it serves no one; Drake's "Meshcat listening" line is muted).
+bound to localhost only, never to every interface; a page's server announces nothing and stops
+once the page is written (it serves no one; Drake's "Meshcat listening" line is muted).
 """
 
 from __future__ import annotations
@@ -47,15 +47,6 @@ def new_meshcat() -> Meshcat:
         return Meshcat(MeshcatParams(host="localhost"))
     finally:
         log.setLevel(level)
-
-
-_PAGES: list[Meshcat] = []  # the one Meshcat that builds this process's pages
-
-
-def _page_meshcat() -> Meshcat:
-    if not _PAGES:
-        _PAGES.append(new_meshcat())
-    return _PAGES[0]
 
 
 def caption(grasp: Grasp) -> str:
@@ -184,7 +175,10 @@ def write_html(
     """A self-contained page: the three phases play as an animation (loop it with the
     Animations controls), captioned with `text` (default: `caption(grasp)`); it opens without
     a server."""
-    meshcat = _page_meshcat()
+    # A Meshcat of its own (0.1 s): a shared one carried every earlier page's leftovers into
+    # the next (a page for one grasp grew with each page before it, and software WebGL slowed
+    # with it); the server stops when the Meshcat is dropped.
+    meshcat = new_meshcat()
     build_scene(meshcat, grasp, obj, hand)
     fps = 10
     anim = MeshcatAnimation(frames_per_second=fps)

@@ -222,6 +222,21 @@ def test_viewer_page_renders_in_headless_chromium(tmp_path):
     assert orange.sum() > 200 and dark.sum() > 200
 
 
+def test_a_page_holds_only_its_own_grasp(tmp_path):
+    """Pages written one after another in a process are each what they would be alone (a
+    shared Meshcat once carried every earlier page into the next)."""
+    from models.hands import load_hand
+    from planner.viewer import write_html
+
+    mug, bottle = make_object("mug", 3), make_object("bottle", 1)
+    hold_mug = plan_grasp(mug, "Hold a mug by body", "allegro").grasp
+    hold_bottle = plan_grasp(bottle, "Hold a bottle by body", "allegro").grasp
+    first = write_html(hold_mug, mug, load_hand("allegro"), tmp_path / "a.html").read_bytes()
+    write_html(hold_bottle, bottle, load_hand("allegro"), tmp_path / "b.html")
+    again = write_html(hold_mug, mug, load_hand("allegro"), tmp_path / "c.html").read_bytes()
+    assert len(again) == len(first)
+
+
 def test_demo_lists_every_hand(tmp_path):
     run = _cli("demo", "--out", str(tmp_path), "--hands", "allegro")
     assert "allegro" in run.stdout and "Use a mug by handle" in run.stdout
