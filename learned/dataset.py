@@ -16,6 +16,7 @@ from __future__ import annotations
 import json
 import zipfile
 from collections import Counter
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -145,8 +146,24 @@ def padded_dof(meta: dict[str, Any]) -> int:
     return max(meta.get("hand_dof", {}).values(), default=1)
 
 
-def load_split(root: str | Path, split: str) -> GraspArrays:
-    """The arrays of one split over all blocks (an empty split has zero rows)."""
+# the name tables of meta.json and the array columns that index them
+NAME_TABLES: dict[str, str] = {
+    "hands": "hand",
+    "categories": "category",
+    "instructions": "instruction",
+    "parts": "part",
+}
+
+
+def load_split(root: str | Path | Sequence[str | Path], split: str) -> GraspArrays:
+    """The arrays of one split over all blocks (an empty split has zero rows). Several dataset
+    folders (e.g. v1 and v2) read as one: their name tables are merged, so a row's hand,
+    category, instruction and part names are its own folder's."""
+    if not isinstance(root, str | Path):
+        roots = list(root)
+        if not roots:
+            raise DatasetError("no dataset folder given")
+        return _merged([load_split(r, split) for r in roots])
     meta = read_meta(root)
     if split not in SPLIT_NAMES:
         raise DatasetError(f"unknown split {split!r}; choose one of {SPLIT_NAMES}")
@@ -160,6 +177,30 @@ def load_split(root: str | Path, split: str) -> GraspArrays:
         return GraspArrays(split, empty_arrays(dof), meta)
     arrays = {k: np.concatenate([p[k] for p in parts]) for k in ARRAYS}
     return GraspArrays(split, arrays, meta)
+
+
+def _merged(splits: list[GraspArrays]) -> GraspArrays:
+    """Splits of several folders as one: name tables united (the first folder's order first),
+    each folder's index columns mapped into them, joint arrays padded to the widest hand."""
+    meta = dict(splits[0].meta)
+    for table in NAME_TABLES:
+        meta[table] = list(dict.fromkeys(n for s in splits for n in s.meta[table]))
+    meta["hand_dof"] = {k: v for s in splits for k, v in s.meta.get("hand_dof", {}).items()}
+    dof = padded_dof(meta)
+    parts = []
+    for sp in splits:
+        arrays = dict(sp.arrays)
+        for table, column in NAME_TABLES.items():
+            index = np.array([meta[table].index(n) for n in sp.meta[table]], dtype=np.int64)
+            arrays[column] = (
+                index[arrays[column]].astype(ARRAYS[column][0]) if len(index) else arrays[column]
+            )
+        for key, (_, shape) in ARRAYS.items():
+            if shape[:1] == ("dof",) and arrays[key].shape[1] < dof:
+                arrays[key] = np.pad(arrays[key], ((0, 0), (0, dof - arrays[key].shape[1])))
+        parts.append(arrays)
+    arrays = {k: np.concatenate([p[k] for p in parts]) for k in ARRAYS}
+    return GraspArrays(splits[0].split, arrays, meta)
 
 
 def empty_arrays(dof: int, n: int = 0) -> dict[str, np.ndarray]:

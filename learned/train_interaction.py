@@ -17,6 +17,7 @@ import os
 import random
 import shutil
 import time
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -349,7 +350,7 @@ def write_curve(history: list[dict[str, float]], path: Path) -> None:
 
 # ---- the loop ----------------------------------------------------------------------------------
 def train(
-    data: str | Path,
+    data: str | Path | Sequence[str | Path],
     out: str | Path,
     settings: TrainSettings | None = None,
     config: InteractionConfig | None = None,
@@ -461,15 +462,16 @@ def train(
 
     final = InteractionModel.new(config, settings.seed)
     final.net.load_state_dict(ema)
+    names = " ".join(map(str, data)) if not isinstance(data, str | Path) else str(data)
     final.info = {
-        "data": str(data),
+        "data": names,
         "data_rows": int(len(rows)),
         "steps": step,
         "minutes": round((time.monotonic() - start) / 60.0, 2),
         "seed": settings.seed,
         "final_loss": float(np.mean([h["loss"] for h in history[-50:]])) if history else None,
         "val_loss": next((h["val"] for h in reversed(history) if "val" in h), None),
-        "command": f"drograsp train interaction --data {data} --out {out} --minutes "
+        "command": f"drograsp train interaction --data {names} --out {out} --minutes "
         f"{settings.minutes:g} --seed {settings.seed}",
     }
     final.save(str(out))

@@ -36,6 +36,9 @@ _RANGES: dict[str, tuple[float | None, float | None]] = {
     "gate_solves": (0, None),
     "sweep_after": (0, None),
     "contact_distance": (1e-6, None),
+    "learned_samples": (1, None),
+    "learned_guidance": (0.0, None),
+    "learned_seed": (0, None),
 }
 _PROGRAM_RANGES: dict[str, tuple[float | None, float | None]] = {
     "major_iterations": (1, None),
@@ -141,9 +144,10 @@ def plan_grasp(obj: Any, text: Any, hand: Any, settings: Any = None) -> Any:
     """Plan a functional grasp: `from planner import plan_grasp`.
 
     obj: an ObjectModel (e.g. models.objects.make_object("mug", 3)), a mesh/cloud file or an
-    (N, 3) array in metres; text: "[Intent] a [Object] by [Part]"; hand: name, hand folder or
-    HandModel; settings: a PlannerSettings. Returns a PlanResult whose grasps carry their
-    object reference (`grasp.metrics["object"]`)."""
+    (N, 3) array in metres, part labels optional; text: any sentence ("grab the mug by its
+    handle") or "[Intent] a [Object] by [Part]"; hand: name, hand folder or HandModel;
+    settings: a PlannerSettings (`proposer`: "auto", "model" or "learned"). Returns a
+    PlanResult whose grasps carry their object reference (`grasp.metrics["object"]`)."""
     from models.objects import ObjectModel, load_object, parse_instruction
     from planner.functional import FunctionalPlanner
     from planner.objectref import object_ref
@@ -151,16 +155,20 @@ def plan_grasp(obj: Any, text: Any, hand: Any, settings: Any = None) -> Any:
     settings = check_settings(settings)
     if not isinstance(text, str) or not text.strip():
         raise InstructionError('the instruction is empty; write e.g. "Use a mug by handle"')
-    instruction = parse_instruction(text)
     if not isinstance(obj, ObjectModel):
         obj = load_object(obj)
-    if not obj.labelled:
-        raise PlanningError(
-            "the object has no part labels, so the model-based planner cannot find the "
-            f"{instruction.part!r}; give labels (load_object(..., labels=, part_names=) for a "
-            "cloud, a labels file for a mesh) or a library object"
-        )
-    result = FunctionalPlanner(_hand(hand), settings).plan(obj, instruction)
+    planner = FunctionalPlanner(_hand(hand), settings)
+    if planner.proposer_for(obj, text) == "learned":
+        instruction: Any = text  # read by the learned stages (learned.understand)
+    else:
+        instruction = parse_instruction(text)
+        if not obj.labelled:
+            raise PlanningError(
+                "the object has no part labels, so the model-based planner cannot find the "
+                f"{instruction.part!r}; give labels (load_object(..., labels=, part_names=) for "
+                'a cloud, a labels file for a mesh), a library object, or proposer="learned"'
+            )
+    result = planner.plan(obj, instruction)
     ref = object_ref(obj)
     for cand in result.candidates:
         if cand.grasp is not None:

@@ -135,6 +135,16 @@ class PlannerSettings:
     # Liftup: the grasp program keeps the hand above a table slab under the object (the
     # definition: no hand point below the object's lowest point); the table is no contact
     liftup_table: bool = True
+    # Where proposals come from: "model" (the geometric proposer of this module: needs part
+    # labels and a "[Intent] a [Object] by [Part]" instruction), "learned" (interaction
+    # diffusion -> D(R,O), planner.learned_proposer: any cloud, any sentence) or "auto": model
+    # where the object has part labels and the instruction parses, learned otherwise. The model-based proposer stays the default for labelled input until the learned
+    # one beats it in `python -m eval.benchmark` (README, "Learned stages").
+    proposer: str = "auto"
+    learned_samples: int = 8  # interaction samples (proposals) the learned proposer draws
+    learned_dro: bool = True  # D(R,O) point targets in the program (False: wrist + anchors)
+    learned_seed: int = 0  # the samples' seed: the same seed, the same proposals
+    learned_guidance: float | None = None  # classifier-free guidance; None: the model's own
     program: ProgramSettings = field(default_factory=ProgramSettings)
 
     def __post_init__(self) -> None:
@@ -162,11 +172,14 @@ class PlannerSettings:
                 "intent_first and intent_search must be 0 or more (intent_search None: no "
                 f"limit), got {self.intent_first} and {self.intent_search}"
             )
+        if self.proposer not in PROPOSERS:
+            raise PlanningError(f"unknown proposer {self.proposer!r}; use one of {PROPOSERS}")
         if self.liftup_reach <= 0:
             raise PlanningError(f"liftup_reach must be positive, got {self.liftup_reach}")
 
 
 RANKINGS = ("task", "epsilon")
+PROPOSERS = ("auto", "model", "learned")
 PROPOSAL_ORDERS = ("anchors", "clearance")
 
 
@@ -187,6 +200,11 @@ class Proposal:
     # placed for the instruction's intent (not by part alone): solved with the intent's
     # program settings (`intent_program`) and, for Liftup, above a table
     shaped: bool = False
+    # targets for hand surface points (learned proposals: D(R,O) after multilateration), with
+    # their weights (GraspTargets.point_targets); None: none
+    point_index: np.ndarray | None = None
+    point_targets: np.ndarray | None = None
+    point_weights: np.ndarray | None = None
 
 
 @dataclass
@@ -245,6 +263,9 @@ class PlanResult:
     grasp: Grasp | None
     candidates: list[CandidateResult]
     notes: list[str] = field(default_factory=list)
+    proposer: str = "model"  # where the proposals came from: "model" or "learned"
+    # how the sentence was read (learned.understand.Understood.to_dict); None: parsed as given
+    understood: dict[str, Any] | None = None
 
     @property
     def best(self) -> CandidateResult | None:
@@ -261,8 +282,9 @@ class PlanResult:
     @property
     def holding(self) -> list[CandidateResult]:
         """Every validated candidate that held and touched the instructed part, in validation
-        order (the returned grasp first)."""
-        held = [c for c in self.candidates if c.success and c.part == self.instruction.part]
+        order (the returned grasp first). On an unlabelled object (no part voted) every
+        validated candidate that held."""
+        held = [c for c in self.candidates if c.success and c.part in (self.instruction.part, None)]
         return sorted(held, key=lambda c: c.order if c.order is not None else -1)
 
     @property
@@ -288,6 +310,8 @@ class PlanResult:
             "instruction": self.instruction.text,
             "hand": self.hand,
             "success": self.success,
+            "proposer": self.proposer,
+            "understood": self.understood,
             "part_instructed": self.instruction.part,
             "part_touched": self.part_touched,
             "intent_ok": self.intent_ok,
@@ -688,15 +712,23 @@ class FunctionalPlanner:
 
     # ---- planning -------------------------------------------------------------------------
     def plan(self, obj: ObjectModel, instruction: Instruction | str) -> PlanResult:
-        """Try proposals in order; return the first grasp that holds and touches the part."""
+        """Try proposals in order; return the first grasp that holds and touches the part.
+
+        The proposals come from the model-based proposer of this module or from the learned
+        stages (planner.learned_proposer), as `settings.proposer` says; solving, the schedule
+        and validation are the same for both."""
+        text = instruction if isinstance(instruction, str) else instruction.text
+        if self.proposer_for(obj, instruction) == "learned":
+            return self._plan_learned(obj, text)
         if isinstance(instruction, str):
             instruction = parse_instruction(instruction)
-        notes = []
         part = instruction.part
         if not obj.labelled:
             raise PlanningError(
                 "the object has no part labels, so the model-based planner cannot find the "
-                f"{part!r}; give labelled input (--part-labels) or a library object"
+                f"{part!r}; give labelled input (--part-labels) or a library object, or plan "
+                "with the learned proposer (--proposer learned, PlannerSettings(proposer="
+                '"learned"))'
             )
         if part not in obj.part_names:
             raise InstructionError(
@@ -712,8 +744,98 @@ class FunctionalPlanner:
         if meaning is not None and any(p.shaped for p in proposals):
             shaped_program, table_top = self._intent_program(obj, meaning)
             build = time.perf_counter() - start - propose_time
-        # Solved a batch at a time, each batch validated best first (planner.schedule), so that
-        # good grasps are found without solving every proposal.
+        times = {"build": build, "propose": propose_time}
+        programs = (program, shaped_program, table_top)
+        return self._run(obj, instruction, part, meaning is not None, proposals, programs, times)
+
+    def proposer_for(self, obj: ObjectModel, instruction: Instruction | str) -> str:
+        """The proposer to use, "model" or "learned": `settings.proposer`, with "auto"
+        resolved: model where the object has part labels and the instruction parses (a part
+        the object lacks is then the user's error, said by the model-based planner), learned
+        otherwise."""
+        if self.settings.proposer != "auto":
+            return self.settings.proposer
+        if not obj.labelled:
+            return "learned"
+        if isinstance(instruction, str):
+            try:
+                parse_instruction(instruction)
+            except InstructionError:
+                return "learned"
+        return "model"
+
+    def _plan_learned(self, obj: ObjectModel, text: str) -> PlanResult:
+        """Plan on the learned stages' proposals. The sentence is read as the nearest table
+        instruction (learned.understand); its part is what the grasp must touch, and its
+        intent is checked, only where the object has part labels that name that part: on an
+        unlabelled cloud a grasp that holds is success."""
+        from learned.understand import understand
+        from planner.learned_proposer import anchor_closure, learned_proposals
+
+        s = self.settings
+        start = time.perf_counter()
+        understood = understand(text)
+        instruction = understood.instruction
+        known = obj.labelled and instruction.part in obj.part_names
+        part = instruction.part if known else None
+        program = grasp_program(self.hand, obj.collision_pieces(), s.program)
+        build = time.perf_counter() - start
+        drawn = learned_proposals(
+            obj,
+            text,
+            self.hand,
+            s.learned_samples,
+            s.learned_seed,
+            s.learned_guidance,
+            s.learned_dro,
+        )
+        proposals = []
+        for i in range(len(drawn.wrists)):
+            target = drawn.targets[i]
+            proposals.append(
+                Proposal(
+                    rounded(drawn.wrists[i]),
+                    self.hand.open_pose.astype(np.float64).copy(),
+                    rounded(drawn.anchors[i]),
+                    rounded(drawn.normals[i]),
+                    0.0,
+                    anchor_quality=anchor_closure(drawn.anchors[i], drawn.normals[i], obj),
+                    kind="learned",
+                    point_index=None if target is None else target.index,
+                    point_targets=None if target is None else rounded(target.targets),
+                    point_weights=None if target is None else target.weights,
+                )
+            )
+        proposals.sort(key=lambda p: -p.anchor_quality)  # stable: sample order breaks ties
+        times = {"build": build, **drawn.times}
+        result = self._run(
+            obj,
+            instruction,
+            part,
+            known and s.intent_aware,
+            proposals,
+            (program, program, None),
+            times,
+        )
+        result.understood = understood.to_dict()
+        result.proposer = "learned"
+        return result
+
+    def _run(
+        self,
+        obj: ObjectModel,
+        instruction: Instruction,
+        part: str | None,
+        check_intent: bool,
+        proposals: list[Proposal],
+        programs: tuple[GraspProgram, GraspProgram, float | None],
+        times: dict[str, float],
+    ) -> PlanResult:
+        """Solve, schedule and validate the proposals (planner.schedule). `programs`: the
+        program, the one for proposals shaped by the intent, and that one's table top; `times`
+        (building and proposing) go to the first candidate. `part` None: any part counts."""
+        notes = []
+        program, shaped_program, table_top = programs
 
         def program_of(rank: int) -> GraspProgram:
             return shaped_program if proposals[rank].shaped else program
@@ -723,8 +845,8 @@ class FunctionalPlanner:
             top = table_top if proposal.shaped else None
             cand = self._solve(program_of(rank), obj, rank, proposal, top)
             if rank == 0:
-                cand.times.update(build=build, propose=propose_time)
-            if meaning is not None and cand.solve.ok:
+                cand.times.update(times)
+            if check_intent and cand.solve.ok:
                 t0 = time.perf_counter()
                 cand.intent = check_configuration(
                     cand.solve.wrist, cand.solve.q, obj, self.hand, instruction
@@ -775,6 +897,9 @@ class FunctionalPlanner:
                 proposal.q,
                 proposal.anchors,
                 proposal.normals,
+                point_index=proposal.point_index,
+                point_targets=proposal.point_targets,
+                point_weights=proposal.point_weights,
                 palm_target=proposal.palm_target,
             )
         )
@@ -853,7 +978,7 @@ class FinishedGrasp:
 
     grasp: Grasp
     success: bool
-    part: str
+    part: str | None  # None: the object has no part labels
     validation: dict[str, Any]
     times: dict[str, float]
 
@@ -899,7 +1024,9 @@ def finish_grasp(
         if again.success:
             grasp, result, depth = deeper, again, retry
     all_tips = hand.fingertip_positions(wrist_t, q_t)[0].numpy()
-    part = voted_part(all_tips, obj.points, obj.point_labels, obj.part_names)
+    part = (  # no labels: no part to vote (an unlabelled cloud)
+        voted_part(all_tips, obj.points, obj.point_labels, obj.part_names) if obj.labelled else None
+    )
     validation = result.to_dict()
     grasp.metrics.update(
         {

@@ -396,3 +396,18 @@ def test_intent_verdicts_become_the_intent_ok_column():
     old = load_split(SHIPPED, "test")
     assert old.meta["format"] == "drograsp-grasps/2" and (old.arrays["intent_ok"] == -1).all()
     assert GraspDataset(SHIPPED, "test")[0]["intent_ok"] == -1
+
+
+def test_several_folders_read_as_one_with_each_rows_own_names():
+    from learned.dataset import load_split
+
+    v1, v2 = Path("data/grasps_v1"), Path("data/grasps_v2")
+    if not (v1 / "meta.json").is_file() or not (v2 / "meta.json").is_file():
+        pytest.skip("the shipped datasets are not in this checkout")
+    a, b = load_split(v1, "val"), load_split(v2, "val")
+    both = load_split([v1, v2], "val")
+    assert len(both) == len(a) + len(b)
+    for table, column in (("hands", "hand"), ("instructions", "instruction"), ("parts", "part")):
+        assert both.names(table, column) == a.names(table, column) + b.names(table, column)
+    assert both.arrays["q_grasp"].shape[1] == max(a.arrays["q_grasp"].shape[1], 22)
+    assert (both.arrays["intent_ok"][: len(a)] == -1).all()  # v1 has no intent verdicts

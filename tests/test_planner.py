@@ -112,7 +112,8 @@ def test_bad_instructions_are_clear_errors():
 def test_unlabelled_cloud_is_a_clear_error():
     cloud = make_object("mug", 3).sample_cloud(2048).points
     with pytest.raises(PlanningError, match="no part labels"):
-        FunctionalPlanner("allegro").plan(load_object(cloud), "Use a mug by handle")
+        model = PlannerSettings(proposer="model")
+        FunctionalPlanner("allegro", model).plan(load_object(cloud), "Use a mug by handle")
 
 
 def _cli(*args: str) -> subprocess.CompletedProcess:

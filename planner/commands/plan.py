@@ -74,7 +74,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         "a grasp holds; 1: none holds; 2: bad input.",
     )
     add_object_arguments(p)
-    p.add_argument("--text", required=True, help='instruction, e.g. "Use a mug by handle"')
+    p.add_argument(
+        "--text",
+        required=True,
+        help='instruction: "Use a mug by handle", or any sentence for the learned proposer '
+        '("grab the mug by its handle")',
+    )
     p.add_argument("--hand", default="shadow", help="built-in hand name or hand folder")
     p.add_argument("--out", metavar="FILE", help="write the grasp (.json or .npz)")
     p.add_argument(
@@ -83,6 +88,20 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--preset", default="paper", choices=PRESET_NAMES, help="validation preset (default paper)"
     )
+    p.add_argument(
+        "--proposer",
+        default="auto",
+        choices=("auto", "model", "learned"),  # planner.functional.PROPOSERS
+        help="where proposals come from: model (needs part labels), learned (interaction "
+        "diffusion -> D(R,O); any cloud, any sentence), auto (model where the object has part "
+        "labels and the instruction parses; default)",
+    )
+    p.add_argument(
+        "--samples",
+        type=positive_int,
+        default=8,
+        help="interaction samples the learned proposer draws (default 8)",
+    )
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.set_defaults(func=run)
 
@@ -90,7 +109,13 @@ def register(sub: argparse._SubParsersAction) -> None:
 def print_summary(result: Any) -> None:
     s = result.summary()
     status = "holds" if s["success"] else "NO GRASP FOUND"
-    print(f"{s['hand']}: {s['instruction']}: {status}")
+    print(f"{s['hand']}: {s['instruction']}: {status} ({s['proposer']} proposals)")
+    read = s["understood"]
+    if read is not None and not read["parsed"]:
+        print(
+            f"  read {read['text']!r} as {read['understood_as']!r} (similarity "
+            f"{read['similarity']:.2f}; next {read['runner_up']!r} {read['runner_up_similarity']:.2f})"
+        )
     print(f"  part touched: {s['part_touched']} (instructed: {s['part_instructed']})")
     if s["anchor_error_mm"] is not None:
         print(f"  anchor error: {s['anchor_error_mm']:.1f} mm")
@@ -128,7 +153,10 @@ def run(args: argparse.Namespace) -> int:
     from models.objects import parse_instruction
 
     check_object_arguments("plan", args)
-    parse_instruction(args.text)
+    if args.proposer == "model":
+        parse_instruction(args.text)
+    elif not args.text.strip():
+        parse_instruction(args.text)  # the empty-instruction error
     check_hand_name(args.hand)
     out = output_file(args.out, GRASP_SUFFIXES, "--out grasp file") if args.out else None
 
@@ -136,21 +164,33 @@ def run(args: argparse.Namespace) -> int:
     from planner.functional import FunctionalPlanner, PlannerSettings
     from planner.objectref import object_ref
 
-    settings = check_settings(PlannerSettings(max_candidates=args.candidates, protocol=args.preset))
+    settings = check_settings(
+        PlannerSettings(
+            max_candidates=args.candidates,
+            protocol=args.preset,
+            proposer=args.proposer,
+            learned_samples=args.samples,
+        )
+    )
     obj = object_from_args(args)
-    if not obj.labelled:
+    planner = FunctionalPlanner(args.hand, settings)
+    learned = planner.proposer_for(obj, args.text) == "learned"
+    if not learned and not obj.labelled:
         raise DrograspError(
             "the object has no part labels, so the planner cannot find the instructed part; "
             "give --part-labels FILE (`drograsp objects label MESH OUT.json` writes one) or a "
-            "library object (--object)"
+            "library object (--object), or plan with --proposer learned"
         )
+    if not learned:
+        parse_instruction(args.text)
+    source = f"{args.samples} learned proposals" if learned else "model-based proposals"
     print(
-        f"planning {args.text!r} with {args.hand}: up to {args.candidates} candidates solved "
-        "(Drake) and validated (MuJoCo)...",
+        f"planning {args.text!r} with {args.hand} from {source}: up to {args.candidates} "
+        "candidates solved (Drake) and validated (MuJoCo)...",
         file=sys.stderr,
         flush=True,
     )
-    result = FunctionalPlanner(args.hand, settings).plan(obj, args.text)
+    result = planner.plan(obj, args.text)
     if args.json:
         print(json.dumps(result.summary(), indent=2))
     else:

@@ -22,7 +22,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         "interaction.safetensors + .json, OUT/loss.png and checkpoints; --install also copies "
         "the weights into the package (learned/weights/) where `sample` loads them.",
     )
-    i.add_argument("--data", required=True, metavar="DIR", help="dataset folder")
+    i.add_argument(
+        "--data",
+        required=True,
+        nargs="+",
+        metavar="DIR",
+        help="dataset folder(s); several read as one (e.g. data/grasps_v1 data/grasps_v2)",
+    )
     i.add_argument("--out", required=True, metavar="DIR", help="run folder (checkpoints, curve)")
     i.add_argument(
         "--minutes",
@@ -88,7 +94,8 @@ def run_interaction(args: argparse.Namespace) -> int:
         checkpoint_minutes=args.checkpoint_minutes,
         balance=args.balance,
     )
-    result = train(args.data, args.out, settings, config, install=args.install)
+    data = args.data[0] if len(args.data) == 1 else args.data
+    result = train(data, args.out, settings, config, install=args.install)
     val = "n/a" if result.val_loss is None else f"{result.val_loss:.4f}"
     print(
         f"trained {result.steps} steps ({result.resumed_from} before this run) in "

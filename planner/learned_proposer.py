@@ -1,0 +1,116 @@
+"""Proposals from the learned stages: no part labels needed, any sentence.
+
+The interaction model (learned.interaction) draws wrist poses and four contact anchors for the
+cloud, sentence and hand; the D(R,O) network (learned.dro) turns each wrist and its anchors
+into targets for the hand's surface points (multilateration + per-body Kabsch, weighted by how
+near contact each point is predicted). Both go to the same grasp program as the model-based
+proposals (planner.functional): anchors with their surface normals, the open pose as the
+starting configuration, and the point targets the program pulls toward (`point_weights`:
+closeness, so far points weigh little). The samples are solved best anchor closure first, as
+the model-based ones.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from models.hands import HandModel
+from models.objects import ObjectModel
+from planner.quality import contact_quality
+
+# D(R,O) targets of hand points predicted at least this close to contact (closeness, e^-1 at
+# 1 cm: about 3 cm) enter the program; the rest are guesswork (learned.dro.closeness)
+MIN_CLOSENESS = 0.05
+
+
+@dataclass
+class LearnedTargets:
+    """D(R,O)'s hand point targets for one sample: which of the hand's surface points, where,
+    and how much each counts."""
+
+    index: np.ndarray  # (K,) into the hand's fixed surface points
+    targets: np.ndarray  # (K, 3) m, object frame
+    weights: np.ndarray  # (K,)
+
+
+@dataclass
+class LearnedProposals:
+    """The samples as drawn, and the time each stage took."""
+
+    wrists: np.ndarray  # (n, 7)
+    anchors: np.ndarray  # (n, 4, 3)
+    normals: np.ndarray  # (n, 4, 3)
+    targets: list[LearnedTargets | None]  # None: D(R,O) not used
+    times: dict[str, float]
+
+
+def learned_proposals(
+    obj: ObjectModel,
+    text: str,
+    hand: HandModel,
+    samples: int,
+    seed: int = 0,
+    guidance: float | None = None,
+    dro: bool = True,
+) -> LearnedProposals:
+    """`samples` interaction samples for the object's cloud, the sentence and the hand, each
+    with its anchors' surface normals and (with `dro`) D(R,O)'s point targets."""
+    from learned.interaction import load_model
+
+    times: dict[str, float] = {}
+    t0 = time.perf_counter()
+    model = load_model()
+    wrists, anchors = model.sample(obj.points, text, hand, samples, guidance, seed=seed)
+    times["interaction"] = time.perf_counter() - t0
+    nearest = cKDTree(obj.points).query(anchors.reshape(-1, 3))[1]
+    normals = obj.normals[nearest].reshape(anchors.shape)
+    targets: list[LearnedTargets | None] = [None] * len(wrists)
+    if dro:
+        t1 = time.perf_counter()
+        targets = _dro_targets(obj, text, hand, wrists, anchors, seed)
+        times["dro"] = time.perf_counter() - t1
+    return LearnedProposals(wrists, anchors, normals, targets, times)
+
+
+def _dro_targets(
+    obj: ObjectModel,
+    text: str,
+    hand: HandModel,
+    wrists: np.ndarray,
+    anchors: np.ndarray,
+    seed: int,
+) -> list[LearnedTargets | None]:
+    from learned.contact_map import object_input
+    from learned.dro import load_weights, predict
+    from learned.text import encode
+
+    net = _dro_net(load_weights)
+    vec = encode([text])[0]
+    rng = np.random.default_rng(seed)
+    out: list[LearnedTargets | None] = []
+    for wrist, anc in zip(wrists, anchors, strict=True):
+        features = object_input(obj.points, anc, rng).features
+        pred = predict(net, hand, wrist, features, vec)
+        keep = np.flatnonzero(pred.closeness > MIN_CLOSENESS)
+        out.append(LearnedTargets(keep, pred.targets[keep], pred.closeness[keep]))
+    return out
+
+
+_NET: list = []
+
+
+def _dro_net(load_weights):
+    """The shipped D(R,O) network, loaded once per process."""
+    if not _NET:
+        _NET.append(load_weights().net)
+    return _NET[0]
+
+
+def anchor_closure(anchors: np.ndarray, normals: np.ndarray, obj: ObjectModel) -> float:
+    """Epsilon of the anchors pushing along their inward normals about the object's centre:
+    the solve order, as for the model-based proposals."""
+    return float(contact_quality(anchors, -normals, obj.points.mean(axis=0)).epsilon)
