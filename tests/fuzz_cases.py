@@ -810,7 +810,9 @@ def cli_cases(files: dict[str, Path], tmp: Path) -> list[Case]:
     add("plan --text no part", ["plan", "--object", "mug", "--text", "Use a mug by lid"], (2,))
     add("plan --mesh missing", ["plan", "--mesh", str(tmp / "none.obj"), "--text", "Use a mug by handle"], (2,))  # fmt: skip
     add("plan --mesh junk", ["plan", "--mesh", str(files["junk.obj"]), "--text", "Use a x by body"], (2,))  # fmt: skip
-    add("plan --mesh unlabelled", ["plan", "--mesh", box, "--text", "Use a box by body"], (2,))
+    add("plan --mesh unlabelled --proposer model", ["plan", "--mesh", box, "--text", "Use a box by body", "--proposer", "model"], (2,))  # fmt: skip
+    add("plan --mesh unlabelled (learned)", ["plan", "--mesh", box, "--text", "hold the box", "--hand", "allegro", "--samples", "2", "--candidates", "1"], (0, 1))  # fmt: skip
+    add("plan --samples 0", ["plan", "--mesh", box, "--text", "hold the box", "--samples", "0"], (2,))  # fmt: skip
     add("plan --mesh bad labels", ["plan", "--mesh", box, "--part-labels", str(files["labels_json"]), "--text", "Use a box by body"], (2,))  # fmt: skip
     add("plan --part-labels without --mesh", plan + ["--part-labels", str(files["labels"])], (2,))
     add("plan --mesh open tube with labels", ["plan", "--mesh", str(files["open"]), "--part-labels", str(files["open_labels"]), "--text", "Hold a tube by body", "--hand", "allegro", "--candidates", "1"], (0, 1))  # fmt: skip
