@@ -19,6 +19,7 @@ import numpy as np
 import torch
 from pydrake.geometry import Box, Capsule, Meshcat, MeshcatAnimation, MeshcatParams, Rgba, Sphere
 from pydrake.math import RigidTransform, RotationMatrix
+from pydrake.perception import PointCloud
 
 from models.grasp import Grasp
 from models.hands import HandModel
@@ -101,13 +102,16 @@ def draw_object(meshcat: Meshcat, obj: ObjectModel, path: str = "/object") -> No
                 Rgba(*rgb, 1.0),
             )
         return
+    # one point-cloud object per part (a sphere per point made a 4 MB page that software WebGL
+    # took minutes to draw)
     labels = obj.point_labels if obj.point_labels is not None else np.zeros(len(obj.points), int)
     for k in np.unique(labels):
         rgb = PART_COLOURS[int(k) % len(PART_COLOURS)]
         name = obj.part_names[k] if obj.part_names else "cloud"
-        for i, p in enumerate(obj.points[labels == k][::4]):
-            meshcat.SetObject(f"{path}/{name}/{i}", Sphere(0.0015), Rgba(*rgb, 1.0))
-            meshcat.SetTransform(f"{path}/{name}/{i}", RigidTransform(p))
+        pts = obj.points[labels == k]
+        cloud = PointCloud(len(pts))
+        cloud.mutable_xyzs()[:] = pts.T
+        meshcat.SetObject(f"{path}/{name}", cloud, 0.004, Rgba(*rgb, 1.0))
 
 
 def _link_poses(hand: HandModel, grasp: Grasp, phase: str) -> np.ndarray:

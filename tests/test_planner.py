@@ -246,6 +246,10 @@ def test_demo_lists_every_hand(tmp_path):
     assert "One part, two intents" in index and "allegro_mug_3_liftup.html" in index
     hold = json.loads((tmp_path / "allegro_bottle_1_hold.json").read_text())
     assert hold["hand"] == "allegro" and "intent_ok" in hold["metrics"]
+    # the learned stages on unlabelled clouds and free sentences, read in the table's terms
+    assert "learned stages" in run.stdout and "grab the mug by its handle" in run.stdout
+    assert "Hold a bottle by body" in run.stdout.split("learned stages")[1]
+    assert "Learned stages: unlabelled clouds" in index
 
 
 def test_task_quality_needs_closure_and_falls_with_a_far_centre_of_mass():

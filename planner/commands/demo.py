@@ -19,6 +19,14 @@ DEMO_TASKS = (
 )
 # the two tasks the index page shows side by side for each hand: one part, two intents
 SIDE_BY_SIDE = ("Use a mug by handle", "Liftup a mug by handle")
+# (category, seed, sentence): unlabelled clouds (4096 surface points, no part labels) and
+# free-form sentences, planned by the learned stages (interaction diffusion -> D(R,O))
+LEARNED_TASKS = (
+    ("mug", 3, "grab the mug by its handle"),
+    ("bottle", 1, "hold the bottle around its body"),
+    ("knife", 2, "hand me the knife handle first"),
+)
+CLOUD_POINTS = 4096
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -26,9 +34,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         "demo",
         help="plan three instructions on built-in objects with every hand; write viewer pages",
         description="Plan 'Use a mug by handle', 'Liftup a mug by handle' and 'Hold a bottle by "
-        "body' with each built-in hand (Drake grasp program + MuJoCo validation), print a table "
-        "(does each grasp hold, on which part, does it meet its intent), and write HTML pages "
-        "showing every grasp, the two intents on the mug's handle side by side.",
+        "body' with each built-in hand (model-based proposals, Drake grasp program, MuJoCo "
+        "validation), then free-form sentences on unlabelled clouds with the learned stages; "
+        "print a table (does each grasp hold, on which part, does it meet its intent), and "
+        "write HTML pages showing every grasp, the two intents on the mug's handle side by side.",
     )
     p.add_argument(
         "--out", default="drograsp_demo", help="folder for the pages (default drograsp_demo)"
@@ -81,22 +90,75 @@ def run(args: argparse.Namespace) -> int:
                 f"{result.part_touched or '-':<13} {intent:<10} {elapsed:>7.2f}",
                 flush=True,
             )
-    index = write_text_atomic(out / "index.html", _index_page(rows), "demo index page")
-    held = sum(r[2] for r in rows)
-    print(f"\n{held}/{len(rows)} grasps hold; open {index} to see them")
+    learned_rows = _learned(hands, out)
+    index = write_text_atomic(
+        out / "index.html", _index_page(rows, learned_rows), "demo index page"
+    )
+    held = sum(r[2] for r in rows) + sum(r[3] for r in learned_rows)
+    total = len(rows) + len(learned_rows)
+    print(f"\n{held}/{total} grasps hold; open {index} to see them")
     return 0 if held else 1
+
+
+def _learned(hands: list[str], out) -> list[tuple]:
+    """Free-form sentences on unlabelled clouds, planned on the learned stages' proposals:
+    rows of (hand, sentence, read as, holds, time s, page)."""
+    from models.hands import load_hand
+    from models.objects import load_object, make_object
+    from planner.functional import FunctionalPlanner, PlannerSettings
+    from planner.objectref import object_ref
+    from planner.viewer import caption, write_html
+
+    print(
+        f"\nlearned stages: {len(LEARNED_TASKS)} sentences on unlabelled {CLOUD_POINTS}-point "
+        "clouds (no part labels)",
+        flush=True,
+    )
+    header = f"{'hand':<8} {'sentence':<34} {'read as':<28} {'success':<8} {'time s':>7}"
+    print(header)
+    print("-" * len(header))
+    rows = []
+    for hand_name in hands:
+        hand = load_hand(hand_name)
+        planner = FunctionalPlanner(hand, PlannerSettings(proposer="learned"))
+        for category, seed, sentence in LEARNED_TASKS:
+            cloud = load_object(make_object(category, seed).sample_cloud(CLOUD_POINTS).points)
+            start = time.perf_counter()
+            result = planner.plan(cloud, sentence)
+            elapsed = time.perf_counter() - start
+            read = result.instruction.text
+            page = None
+            if result.grasp is not None:
+                result.grasp.metrics["object"] = object_ref(cloud)
+                stem = f"{hand_name}_{category}_{seed}_learned"
+                result.grasp.save(out / f"{stem}.json")
+                text = f'"{sentence}" (read as: {read}) · learned · {caption(result.grasp)}'
+                page = write_html(result.grasp, cloud, hand, out / f"{stem}.html", text).name
+            rows.append((hand_name, sentence, read, result.success, elapsed, page))
+            print(
+                f"{hand_name:<8} {sentence:<34} {read:<28} "
+                f"{'yes' if result.success else 'no':<8} {elapsed:>7.2f}",
+                flush=True,
+            )
+    return rows
 
 
 def _yes_no(flag: bool | None) -> str:
     return "-" if flag is None else ("yes" if flag else "no")
 
 
-def _index_page(rows) -> str:
+def _index_page(rows, learned_rows=()) -> str:
     body = "".join(
         f"<tr><td>{html.escape(h)}</td><td>{html.escape(t)}</td><td>{'yes' if ok else 'no'}</td>"
         f"<td>{html.escape(p or '-')}</td><td>{i}</td><td>{s:.2f}</td>"
         f"<td>{f'<a href={page!r}>view</a>' if page else '-'}</td></tr>"
         for h, t, ok, p, i, s, page in rows
+    )
+    learned = "".join(
+        f"<tr><td>{html.escape(h)}</td><td>{html.escape(t)}</td><td>{html.escape(read)}</td>"
+        f"<td>{'yes' if ok else 'no'}</td><td>{s:.2f}</td>"
+        f"<td>{f'<a href={page!r}>view</a>' if page else '-'}</td></tr>"
+        for h, t, read, ok, s, page in learned_rows
     )
     pages = {(r[0], r[1]): r[6] for r in rows}
     pairs = ""
@@ -118,4 +180,7 @@ def _index_page(rows) -> str:
         "<h1>drograsp demo</h1><table><tr><th>hand</th><th>instruction</th><th>holds</th>"
         "<th>part touched</th><th>meets its intent</th><th>time (s)</th><th>grasp</th></tr>"
         f"{body}</table><h2>One part, two intents</h2><table>{pairs}</table>"
+        "<h2>Learned stages: unlabelled clouds, free-form sentences</h2><table><tr><th>hand"
+        "</th><th>sentence</th><th>read as</th><th>holds</th><th>time (s)</th><th>grasp</th>"
+        f"</tr>{learned}</table>"
     )
