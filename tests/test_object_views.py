@@ -1,0 +1,48 @@
+"""What a depth camera sees (models.objects.views) and objects turned in space."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+
+from models.errors import ObjectError
+from models.objects import load_object, make_object
+from models.objects.views import Camera, random_turn, single_view, single_view_object, turned
+
+
+def test_a_single_view_is_the_near_side_of_the_surface_with_depth_noise():
+    mug = make_object("mug", 3)
+    points, labels, eye = single_view(mug, Camera(depth_noise=0.001), seed=0)
+    assert 1000 < len(points) < 160 * 120 and labels is not None and len(labels) == len(points)
+    _, distance, _ = trimesh.proximity.closest_point(mug.mesh, points)
+    assert np.median(distance) < 0.0015 and distance.max() < 0.006  # 1 mm noise along rays
+    # the camera sees the side facing it: the points lie nearer the camera than the far side
+    centre = mug.mesh.bounds.mean(axis=0)
+    toward = (eye - centre) / np.linalg.norm(eye - centre)
+    assert np.mean((points - centre) @ toward > -0.01) > 0.8
+    view = single_view_object(mug, seed=0, labelled=True)
+    assert view.labelled and view.part_names == mug.part_names
+    assert not single_view_object(mug, seed=0).labelled
+
+
+def test_a_view_needs_a_mesh_and_enough_points():
+    cloud = load_object(make_object("mug", 3).sample_cloud(2048).points)
+    with pytest.raises(ObjectError, match="from a mesh"):
+        single_view(cloud)
+    with pytest.raises(ObjectError, match="closer"):
+        single_view(make_object("mug", 3), Camera(distance=20.0))
+
+
+def test_a_turned_object_keeps_its_shape_and_labels():
+    mug = make_object("mug", 3)
+    rot = random_turn(5)
+    assert np.allclose(rot @ rot.T, np.eye(3)) and np.linalg.det(rot) == pytest.approx(1.0)
+    # at most 30 degrees of tilt: the object's up axis stays within 30 degrees of vertical
+    assert rot[2, 2] >= np.cos(np.radians(30)) - 1e-9
+    t = turned(mug, rot)
+    assert t.labelled and t.part_names == mug.part_names and t.seed is None
+    assert np.allclose(t.mesh.vertices, mug.mesh.vertices @ rot.T)
+    assert np.allclose(t.construction_pieces[0], np.asarray(mug.construction_pieces[0]) @ rot.T)
+    with pytest.raises(ObjectError, match="rotation"):
+        turned(mug, np.eye(3) * 2)
