@@ -11,10 +11,9 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
-if TYPE_CHECKING:  # planner.functional imports this module
-    from planner.functional import CandidateResult, PlannerSettings
+from planner.results import CandidateResult
+from planner.settings import PlannerSettings
 
 
 @dataclass

@@ -17,9 +17,10 @@ import pytest
 
 from models.errors import DrograspError, InstructionError, PlanningError
 from models.grasp import Grasp
+from models.hands import load_hand
 from models.objects import load_object, make_object
 from planner import plan_grasp
-from planner.functional import FunctionalPlanner, PlannerSettings
+from planner.functional import FunctionalPlanner, HandGeometry, PlannerSettings
 from planner.labels import voted_part
 
 
@@ -407,7 +408,7 @@ def test_anchors_keep_off_the_border_with_other_parts(hand_name):
 def test_anchors_the_hand_cannot_span_pinch_the_near_edge(hand_name):
     pan = make_object("pan", 3)  # its body is 17-19 cm across
     settings = PlannerSettings()
-    limit = settings.span_factor * FunctionalPlanner(hand_name).geometry.span
+    limit = settings.span_factor * HandGeometry(load_hand(hand_name)).span
 
     def spans(settings: PlannerSettings) -> np.ndarray:
         proposals = FunctionalPlanner(hand_name, settings).propose(pan, "body")

@@ -1,0 +1,151 @@
+"""How the planner plans: every knob of FunctionalPlanner, with why each default is what it is.
+
+Kept apart from the planner so the schedule (planner.schedule), the proposers and the API's
+checks (planner.api.check_settings) can read them without importing the planner.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from models.errors import PlanningError
+from models.objects import INTENTS
+from planner.grasp_program import ProgramSettings
+
+
+@dataclass(frozen=True)
+class PlannerSettings:
+    max_candidates: int = 8  # grasps validated at most (the costly step)
+    max_proposals: int = 16  # wrist poses + anchors solved at most
+    approach_step_deg: float = 45.0  # approach directions around the part's long axis
+    protocol: str = "paper"
+    approach_clearance: float = 0.06  # m from the anchors' centre to test the palm's free space
+    palm_margin: float = 0.004  # m between the palm target and the part's near surface
+    # anchors keep this far (m) from the instructed part's border with other parts, or half the
+    # part's widest border distance where the part is smaller: the outermost points of a bowl's
+    # body lie just below its rim, and grasps there voted "rim" though they held
+    border_margin: float = 0.005
+    # anchors planned farther apart (thumb to the fingers' mean) than this many times the
+    # hand's half-closed thumb-finger span cannot be reached (a pan's body, 17-19 cm across):
+    # the fingers then go to the part's side nearest the palm and the thumb straight across
+    # the part from them, pinching its near edge or wall
+    span_factor: float = 1.25
+    # May proposals on parts thinner than an anchor fingertip (pens, knife handles) carry a palm
+    # target? None: as the hand's hand.json `palm_on_thin_parts` says (default true; false for
+    # Allegro, docs/planner_log.md "No palm target on thin parts").
+    palm_on_thin_parts: bool | None = None
+    use_palm: bool = True
+    # pinch proposals (thumb and the next two anchor fingers, the last anchor finger free)
+    # solved after the max_proposals regular ones; None: as the hand's hand.json
+    # `pinch_proposals` says (default 0; 8 for LEAP, docs/planner_log.md "Pinch proposals")
+    pinch_proposals: int | None = None
+    # proposals solved before the best of them are validated. With the anchor-closure order the
+    # first proposals are the likeliest to hold, so small batches waste fewer solves: on the 300
+    # test pairs 2 vs 4 gave the same returned rates, first-candidate 65/69/68% vs 70/70/68%
+    # and 6.3/7.8/7.9 vs 7.6/8.8/9.1 solves per returned grasp (1: 62/69/70%, 5.9/7.3/7.6).
+    solve_batch: int = 2
+    # epsilon below this: validated only when nothing better is left. Weak force closure
+    # (0.02-0.1) mostly slips and used up the validations before a later batch's strong
+    # candidates were reached (mug handles); 0.1 vs 0.02 on the 100 Allegro and LEAP test pairs
+    # of `--objects-per-category 1`: returned success 82/76% vs 74/72%.
+    min_quality: float = 0.1
+    # ... but only for the first `gate_solves` solves: after them the weak candidates join the
+    # validation queue (best task metric first) instead of waiting until every proposal is
+    # solved. Replayed on all-validated records of the validation split, 6 vs never gave
+    # returned success 85/95/95% vs 86/93/93% with 4.1/5.1/4.0 vs 6.7/7.9/7.2 solves per
+    # returned grasp (docs/planner_log.md, "Gate on the first solves").
+    gate_solves: int = 6
+    # After this many validations without a grasp that holds on the part, every remaining
+    # proposal is solved before the next validation (even in the middle of a batch's queue), so
+    # the rest of the `max_candidates` go to the best of all of them (task metric) instead of
+    # to whichever batch comes next. Replayed on all-validated records of the validation split,
+    # 3 gave 94/95/100% held on the part against 93/95/99% at 4 and 86/93/95% without a sweep
+    # (docs/planner_log.md, "Sweep after failed validations").
+    # None: batch by batch to the end.
+    sweep_after: int | None = 3
+    contact_distance: float = 0.006  # m: hand geometry this close to the object counts as contact
+    # Validate every candidate within max_candidates instead of stopping at the first grasp that
+    # holds on the part: solves are already paid for, so each extra validation is the cheapest
+    # way to another grasp (dataset generation keeps them all, see PlanResult.holding).
+    validate_all: bool = False
+    mass_centred: bool = True  # anchors near the object's centre of mass along the part
+    ranking: str = "task"  # validation order: "task" or "epsilon" (planner.quality)
+    # solve order of the proposals: "anchors" (force closure of the planned anchors, best
+    # first) or "clearance" (free space for the palm, the earlier order)
+    proposal_order: str = "anchors"
+    # Shape proposals by the instruction's intent (models/objects/intents.py): Liftup from
+    # above, Handover and Use with anchors kept off the parts the hand must leave free, and
+    # validate candidates whose solved configuration meets the intent first (planner.schedule).
+    # False: proposals by part alone, as before the intent definitions.
+    intent_aware: bool = True
+    # validations in which candidates meeting the intent go first; then by quality alone
+    intent_first: int = 4
+    # after a grasp held on the part but missed its intent: proposals solved at most to find
+    # one that meets it (None: all of them). On the 150 test pairs of `--objects-per-category
+    # 1`, 4 gave 65/49/66% (allegro/leap/shadow) of the grasps held on the part meeting their
+    # intent; searching every proposal (before the by-part proposals were added in turn),
+    # 83/65/77% (docs/intent_log.md)
+    intent_search: int | None = None
+    # Liftup: palm directions (palm -> object) tilted this far from straight down, besides
+    # straight down, at `liftup_azimuths` azimuths
+    liftup_tilt_deg: float = 20.0
+    liftup_azimuths: int = 4
+    # Liftup: anchors lie this far (m) below the part's top at most, where it is taller: fingers
+    # reaching down from above
+    liftup_reach: float = 0.045
+    # The grasp program's weights per intent (ProgramSettings field -> value), over `program`:
+    # Hold pulls the palm onto its target harder (palm contact), Liftup keeps the proposal's
+    # palm-down wrist rotation
+    intent_program: tuple[tuple[str, str, float], ...] = (
+        ("Hold", "palm_weight", 200.0),
+        ("Liftup", "wrist_rotation_weight", 1.0),
+    )
+    # Liftup: the grasp program keeps the hand above a table slab under the object (the
+    # definition: no hand point below the object's lowest point); the table is no contact
+    liftup_table: bool = True
+    # Where proposals come from: "model" (the geometric proposer of this module: needs part
+    # labels and a "[Intent] a [Object] by [Part]" instruction), "learned" (interaction
+    # diffusion -> D(R,O), planner.learned_proposer: any cloud, any sentence) or "auto": model
+    # where the object has part labels and the instruction parses, learned otherwise. The model-based proposer stays the default for labelled input until the learned
+    # one beats it in `python -m eval.benchmark` (README, "Learned stages").
+    proposer: str = "auto"
+    learned_samples: int = 8  # interaction samples (proposals) the learned proposer draws
+    learned_dro: bool = True  # D(R,O) point targets in the program (False: wrist + anchors)
+    learned_seed: int = 0  # the samples' seed: the same seed, the same proposals
+    learned_guidance: float | None = None  # classifier-free guidance; None: the model's own
+    program: ProgramSettings = field(default_factory=ProgramSettings)
+
+    def __post_init__(self) -> None:
+        if self.ranking not in RANKINGS:
+            raise PlanningError(f"unknown ranking {self.ranking!r}; use one of {RANKINGS}")
+        if self.pinch_proposals is not None and self.pinch_proposals < 0:
+            raise PlanningError(f"pinch_proposals must be 0 or more, got {self.pinch_proposals}")
+        if self.proposal_order not in PROPOSAL_ORDERS:
+            raise PlanningError(
+                f"unknown proposal_order {self.proposal_order!r}; use one of {PROPOSAL_ORDERS}"
+            )
+        if not 0 <= self.liftup_tilt_deg < 60 or self.liftup_azimuths < 0:
+            raise PlanningError(
+                "liftup_tilt_deg must be in [0, 60) and liftup_azimuths 0 or more, got "
+                f"{self.liftup_tilt_deg} and {self.liftup_azimuths}"
+            )
+        for intent, name, _ in self.intent_program:
+            if intent not in INTENTS or name not in ProgramSettings.__dataclass_fields__:
+                raise PlanningError(
+                    f"intent_program entry ({intent!r}, {name!r}): expected an intent of "
+                    f"{INTENTS} and a ProgramSettings field"
+                )
+        if self.intent_first < 0 or (self.intent_search is not None and self.intent_search < 0):
+            raise PlanningError(
+                "intent_first and intent_search must be 0 or more (intent_search None: no "
+                f"limit), got {self.intent_first} and {self.intent_search}"
+            )
+        if self.proposer not in PROPOSERS:
+            raise PlanningError(f"unknown proposer {self.proposer!r}; use one of {PROPOSERS}")
+        if self.liftup_reach <= 0:
+            raise PlanningError(f"liftup_reach must be positive, got {self.liftup_reach}")
+
+
+RANKINGS = ("task", "epsilon")
+PROPOSERS = ("auto", "model", "learned")
+PROPOSAL_ORDERS = ("anchors", "clearance")
