@@ -291,7 +291,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--view", default="full", choices=("full", "single"), help="object or one view")
     p.add_argument("--turn", action="store_true", help="turn every object (yaw, tilt <= 30 deg)")
     p.add_argument("--candidates", type=int, default=8, help="validations per pair at most")
-    p.add_argument("--samples", type=int, default=8, help="learned proposals per pair")
+    p.add_argument("--samples", type=int, default=16, help="learned proposals per pair")
     p.add_argument("--workers", type=int, default=1)
     p.add_argument("--out", default="runs/benchmark", help="records, summary, table, plot")
     args = p.parse_args(argv)

@@ -99,8 +99,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--samples",
         type=positive_int,
-        default=8,
-        help="interaction samples the learned proposer draws (default 8)",
+        default=16,
+        help="interaction samples the learned proposer draws (default 16)",
     )
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.set_defaults(func=run)
