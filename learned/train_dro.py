@@ -31,6 +31,7 @@ import json
 import math
 import shutil
 import time
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -59,7 +60,7 @@ class TrainingError(DrograspError, RuntimeError):
 class TrainConfig:
     """One training run; every field is a command-line option."""
 
-    data: str
+    data: str | list[str]  # a dataset folder, or several read as one
     out: str
     epochs: int = 20
     minutes: float | None = None  # stop (and save) after this much training time
@@ -143,7 +144,7 @@ def embed(texts: list[str]) -> np.ndarray:
 
 
 def prepare(
-    root: str | Path,
+    root: str | Path | Sequence[str | Path],
     split: str,
     hands: tuple[str, ...] | None = None,
     dense_points: int = 4096,
@@ -168,7 +169,8 @@ def prepare(
     rows = np.flatnonzero(keep)[:max_rows]
     if len(rows) == 0:
         raise TrainingError(f"{root}: no {split} rows" + (f" for hands {hands}" if hands else ""))
-    meta_text = (Path(root) / "meta.json").read_bytes()
+    roots = [root] if isinstance(root, str | Path) else list(root)
+    meta_text = b"".join((Path(r) / "meta.json").read_bytes() for r in roots)
     key = hashlib.sha256(
         meta_text + json.dumps([split, hands, dense_points, rows.tolist()]).encode()
     ).hexdigest()[:16]
@@ -459,7 +461,7 @@ def train(cfg: TrainConfig, progress: bool = True) -> Path:
             "epochs": step / per_epoch,
             "train_rows": len(data),
             "hands": sorted(set(data.hands)),
-            "data": str(cfg.data),
+            "data": cfg.data if isinstance(cfg.data, str) else " ".join(map(str, cfg.data)),
             "val_d_error_m": history[-1]["val_d_error"],
             "train_seconds": round(elapsed, 1),
             "seed": cfg.seed,
@@ -498,7 +500,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def config_from_args(args: argparse.Namespace) -> TrainConfig:
     """A TrainConfig from parsed options; options left out keep TrainConfig's defaults."""
     given = {name: getattr(args, name, None) for name, _, _ in OPTIONS}
-    cfg = TrainConfig(args.data, args.out, **{k: v for k, v in given.items() if v is not None})
+    data = args.data[0] if isinstance(args.data, list) and len(args.data) == 1 else args.data
+    cfg = TrainConfig(data, args.out, **{k: v for k, v in given.items() if v is not None})
     if getattr(args, "hands", None):
         cfg.hands = tuple(args.hands)
     return cfg

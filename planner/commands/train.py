@@ -64,7 +64,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         description="Train the D(R,O) network (learned.train_dro): writes OUT/dro.safetensors, "
         "OUT/loss.png and OUT/checkpoint.pt; --install copies the weights to learned/weights/.",
     )
-    d.add_argument("--data", required=True, metavar="DIR", help="dataset folder")
+    d.add_argument(
+        "--data",
+        required=True,
+        nargs="+",
+        metavar="DIR",
+        help="dataset folder(s); several read as one (e.g. data/grasps_v1 data/grasps_v2)",
+    )
     d.add_argument("--out", required=True, metavar="DIR", help="run folder (checkpoints, curve)")
     d.add_argument("--minutes", type=positive_float, default=None, help="training time budget")
     d.add_argument("--epochs", type=positive_int, default=None, help="default 20")
