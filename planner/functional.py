@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, replace
-from functools import cached_property
+from functools import cached_property, partial
 from typing import Any
 
 import numpy as np
@@ -126,7 +126,7 @@ class FunctionalPlanner:
         intent is checked, only where the object has part labels that name that part: on an
         unlabelled cloud a grasp that holds is success."""
         from learned.understand import understand
-        from planner.learned_proposer import anchor_closure, learned_proposals
+        from planner.learned_proposer import anchor_closure, dro_targets, learned_proposals
 
         s = self.settings
         start = time.perf_counter()
@@ -137,29 +137,25 @@ class FunctionalPlanner:
         program = grasp_program(self.hand, obj.collision_pieces(), s.program)
         build = time.perf_counter() - start
         drawn = learned_proposals(
-            obj,
-            text,
-            self.hand,
-            s.learned_samples,
-            s.learned_seed,
-            s.learned_guidance,
-            s.learned_dro,
+            obj, text, self.hand, s.learned_samples, s.learned_seed, s.learned_guidance
         )
         proposals = []
         for i in range(len(drawn.wrists)):
-            target = drawn.targets[i]
+            wrist, anchors = rounded(drawn.wrists[i]), rounded(drawn.anchors[i])
+            pending = None
+            if s.learned_dro:
+                key = (s.learned_seed, i)
+                pending = partial(dro_targets, obj, text, self.hand, wrist, anchors, key)
             proposals.append(
                 Proposal(
-                    rounded(drawn.wrists[i]),
+                    wrist,
                     self.hand.open_pose.astype(np.float64).copy(),
-                    rounded(drawn.anchors[i]),
+                    anchors,
                     rounded(drawn.normals[i]),
                     0.0,
                     anchor_quality=anchor_closure(drawn.anchors[i], drawn.normals[i], obj),
                     kind="learned",
-                    point_index=None if target is None else target.index,
-                    point_targets=None if target is None else rounded(target.targets),
-                    point_weights=None if target is None else target.weights,
+                    pending_targets=pending,
                 )
             )
         proposals.sort(key=lambda p: -p.anchor_quality)  # stable: sample order breaks ties
@@ -247,6 +243,13 @@ class FunctionalPlanner:
 
     def _solve(self, program, obj, rank, proposal, table_top=None) -> CandidateResult:
         """Solve one proposal and score its contacts (epsilon and task quality at the grasp)."""
+        times = {}
+        if proposal.pending_targets is not None:  # D(R,O), made when the proposal is solved
+            t0 = time.perf_counter()
+            made = proposal.pending_targets()
+            proposal.point_index, proposal.point_targets = made.index, rounded(made.targets)
+            proposal.point_weights, proposal.pending_targets = made.weights, None
+            times["dro"] = time.perf_counter() - t0
         solved = program.solve(
             GraspTargets(
                 proposal.wrist,
@@ -259,7 +262,7 @@ class FunctionalPlanner:
                 palm_target=proposal.palm_target,
             )
         )
-        cand = CandidateResult(rank, proposal, solved, times={"solve": solved.solve_time})
+        cand = CandidateResult(rank, proposal, solved, times={**times, "solve": solved.solve_time})
         if solved.ok:
             t0 = time.perf_counter()
             points, inward = program.contacts(

@@ -39,12 +39,11 @@ class LearnedTargets:
 
 @dataclass
 class LearnedProposals:
-    """The samples as drawn, and the time each stage took."""
+    """The samples as drawn, and the time drawing them took."""
 
     wrists: np.ndarray  # (n, 7)
     anchors: np.ndarray  # (n, 4, 3)
     normals: np.ndarray  # (n, 4, 3)
-    targets: list[LearnedTargets | None]  # None: D(R,O) not used
     times: dict[str, float]
 
 
@@ -55,49 +54,40 @@ def learned_proposals(
     samples: int,
     seed: int = 0,
     guidance: float | None = None,
-    dro: bool = True,
 ) -> LearnedProposals:
     """`samples` interaction samples for the object's cloud, the sentence and the hand, each
-    with its anchors' surface normals and (with `dro`) D(R,O)'s point targets."""
+    with its anchors' surface normals. D(R,O)'s targets are made per sample when it is solved
+    (`dro_targets`): most plans end after a few solves, and D(R,O) costs 0.1-0.6 s a sample."""
     from learned.interaction import load_model
 
-    times: dict[str, float] = {}
     t0 = time.perf_counter()
     model = load_model()
     wrists, anchors = model.sample(obj.points, text, hand, samples, guidance, seed=seed)
-    times["interaction"] = time.perf_counter() - t0
+    times = {"interaction": time.perf_counter() - t0}
     nearest = cKDTree(obj.points).query(anchors.reshape(-1, 3))[1]
     normals = obj.normals[nearest].reshape(anchors.shape)
-    targets: list[LearnedTargets | None] = [None] * len(wrists)
-    if dro:
-        t1 = time.perf_counter()
-        targets = _dro_targets(obj, text, hand, wrists, anchors, seed)
-        times["dro"] = time.perf_counter() - t1
-    return LearnedProposals(wrists, anchors, normals, targets, times)
+    return LearnedProposals(wrists, anchors, normals, times)
 
 
-def _dro_targets(
+def dro_targets(
     obj: ObjectModel,
     text: str,
     hand: HandModel,
-    wrists: np.ndarray,
+    wrist: np.ndarray,
     anchors: np.ndarray,
-    seed: int,
-) -> list[LearnedTargets | None]:
+    seed: tuple[int, int],
+) -> LearnedTargets:
+    """D(R,O)'s hand point targets for one sample; `seed` (plan seed, sample index) seeds its
+    object input, so a sample's targets do not depend on which samples were solved before."""
     from learned.contact_map import object_input
     from learned.dro import load_weights, predict
     from learned.text import encode
 
     net = _dro_net(load_weights)
-    vec = encode([text])[0]
-    rng = np.random.default_rng(seed)
-    out: list[LearnedTargets | None] = []
-    for wrist, anc in zip(wrists, anchors, strict=True):
-        features = object_input(obj.points, anc, rng).features
-        pred = predict(net, hand, wrist, features, vec)
-        keep = np.flatnonzero(pred.closeness > MIN_CLOSENESS)
-        out.append(LearnedTargets(keep, pred.targets[keep], pred.closeness[keep]))
-    return out
+    features = object_input(obj.points, anchors, np.random.default_rng(list(seed))).features
+    pred = predict(net, hand, wrist, features, encode([text])[0])
+    keep = np.flatnonzero(pred.closeness > MIN_CLOSENESS)
+    return LearnedTargets(keep, pred.targets[keep], pred.closeness[keep])
 
 
 _NET: list = []

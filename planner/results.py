@@ -7,6 +7,7 @@ for its data.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -40,6 +41,9 @@ class Proposal:
     point_index: np.ndarray | None = None
     point_targets: np.ndarray | None = None
     point_weights: np.ndarray | None = None
+    # a learned proposal's D(R,O) targets, made when it is solved (planner.learned_proposer.
+    # dro_targets): returns LearnedTargets, which fill the three fields above
+    pending_targets: Callable[[], Any] | None = None
 
 
 @dataclass
