@@ -45,7 +45,7 @@ from models.hands import available_hands, load_hand
 from models.objects import ObjectModel, make_object
 from models.objects.views import random_turn, single_view_object, turned
 from planner.functional import FunctionalPlanner, PlannerSettings
-from planner.labels import voted_part
+from planner.labels import grasp_part
 from planner.validation import validate
 
 METHODS: dict[str, dict[str, Any]] = {
@@ -101,9 +101,8 @@ def unlabelled(obj: ObjectModel) -> ObjectModel:
 
 def touched_part(grasp, obj: ObjectModel, hand) -> str:
     """The part the grasp's fingertips vote for, on the labelled object."""
-    wrist = torch.tensor(np.concatenate([grasp.wrist_pos, grasp.wrist_quat])[None])
-    tips = hand.fingertip_positions(wrist, torch.tensor(np.asarray(grasp.grasp)[None]))[0]
-    return voted_part(tips.numpy(), obj.points, obj.point_labels, obj.part_names)
+    wrist = np.concatenate([grasp.wrist_pos, grasp.wrist_quat])
+    return grasp_part(hand, wrist, np.asarray(grasp.grasp), obj)
 
 
 _PLANNERS: dict[tuple[str, str], FunctionalPlanner] = {}

@@ -13,7 +13,7 @@ import dataclasses
 import math
 from typing import Any
 
-from models.errors import DrograspError, HandError, InstructionError, PlanningError
+from models.errors import DrograspError, HandError, InstructionError
 
 __all__ = ["check_settings", "plan_grasp"]
 
@@ -148,7 +148,7 @@ def plan_grasp(obj: Any, text: Any, hand: Any, settings: Any = None) -> Any:
     handle") or "[Intent] a [Object] by [Part]"; hand: name, hand folder or HandModel;
     settings: a PlannerSettings (`proposer`: "auto", "model" or "learned"). Returns a
     PlanResult whose grasps carry their object reference (`grasp.metrics["object"]`)."""
-    from models.objects import ObjectModel, load_object, parse_instruction
+    from models.objects import ObjectModel, load_object
     from planner.functional import FunctionalPlanner
     from planner.objectref import object_ref
 
@@ -157,18 +157,9 @@ def plan_grasp(obj: Any, text: Any, hand: Any, settings: Any = None) -> Any:
         raise InstructionError('the instruction is empty; write e.g. "Use a mug by handle"')
     if not isinstance(obj, ObjectModel):
         obj = load_object(obj)
-    planner = FunctionalPlanner(_hand(hand), settings)
-    if planner.proposer_for(obj, text) == "learned":
-        instruction: Any = text  # read by the learned stages (learned.understand)
-    else:
-        instruction = parse_instruction(text)
-        if not obj.labelled:
-            raise PlanningError(
-                "the object has no part labels, so the model-based planner cannot find the "
-                f"{instruction.part!r}; give labels (load_object(..., labels=, part_names=) for "
-                'a cloud, a labels file for a mesh), a library object, or proposer="learned"'
-            )
-    result = planner.plan(obj, instruction)
+    # FunctionalPlanner.plan parses the text, or reads it with the learned stages, and
+    # refuses an unlabelled object for the model-based proposer
+    result = FunctionalPlanner(_hand(hand), settings).plan(obj, text)
     ref = object_ref(obj)
     for cand in result.candidates:
         if cand.grasp is not None:

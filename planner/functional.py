@@ -26,7 +26,7 @@ from models.objects.intents import Definition
 from models.reproducible import rounded
 from planner.grasp_program import GraspProgram, GraspTargets, SolveResult, grasp_program
 from planner.intent import check_configuration, intent_definition
-from planner.labels import voted_part
+from planner.labels import grasp_part
 from planner.model_proposer import HandGeometry, ModelProposer
 from planner.quality import contact_quality
 from planner.results import CandidateResult, PlanResult, Proposal
@@ -353,10 +353,7 @@ def finish_grasp(
         times["retry"] = time.perf_counter() - t3
         if again.success:
             grasp, result, depth = deeper, again, retry
-    all_tips = hand.fingertip_positions(wrist_t, q_t)[0].numpy()
-    part = (  # no labels: no part to vote (an unlabelled cloud)
-        voted_part(all_tips, obj.points, obj.point_labels, obj.part_names) if obj.labelled else None
-    )
+    part = grasp_part(hand, solved.wrist, solved.q, obj)  # None: an unlabelled object
     validation = result.to_dict()
     grasp.metrics.update(
         {

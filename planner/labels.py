@@ -35,3 +35,16 @@ def voted_part(
     counts = Counter(votes)
     best = max(counts.values())
     return next(v for v in votes if counts[v] == best)
+
+
+def grasp_part(hand, wrist: np.ndarray, q: np.ndarray, obj) -> str | None:
+    """The part a hand configuration touches on a labelled object: `voted_part` of every
+    fingertip at wrist [x, y, z, qw, qx, qy, qz] and joints q; None on an unlabelled object."""
+    if not obj.labelled:
+        return None
+    import torch
+
+    wrist_t = torch.tensor(np.asarray(wrist, dtype=np.float64)[None])
+    q_t = torch.tensor(np.asarray(q, dtype=np.float64)[None])
+    tips = hand.fingertip_positions(wrist_t, q_t)[0].numpy()
+    return voted_part(tips, obj.points, obj.point_labels, obj.part_names)

@@ -80,10 +80,10 @@ def dro_targets(
     """D(R,O)'s hand point targets for one sample; `seed` (plan seed, sample index) seeds its
     object input, so a sample's targets do not depend on which samples were solved before."""
     from learned.contact_map import object_input
-    from learned.dro import load_weights, predict
+    from learned.dro import predict
     from learned.text import encode
 
-    net = _dro_net(load_weights)
+    net = _dro_net()
     features = object_input(obj.points, anchors, np.random.default_rng(list(seed))).features
     pred = predict(net, hand, wrist, features, encode([text])[0])
     keep = np.flatnonzero(pred.closeness > MIN_CLOSENESS)
@@ -93,8 +93,10 @@ def dro_targets(
 _NET: list = []
 
 
-def _dro_net(load_weights):
+def _dro_net():
     """The shipped D(R,O) network, loaded once per process."""
+    from learned.dro import load_weights
+
     if not _NET:
         _NET.append(load_weights().net)
     return _NET[0]
