@@ -51,11 +51,13 @@ from planner.validation import validate
 METHODS: dict[str, dict[str, Any]] = {
     "learned": {"proposer": "learned"},  # interaction diffusion -> D(R,O) -> Drake -> MuJoCo
     "no_dro": {"proposer": "learned", "learned_dro": False},  # wrist + anchors into Drake
+    # D(R,O) -> every point's target -> joints fitted without collision constraints (D(R,O)
+    # Grasp's way; the grasp program is not run)
+    "no_drake": {"proposer": "learned", "learned_solver": "fit"},
     "model": {"proposer": "model"},  # the model-based planner, part labels given
 }
 NOT_BUILT: dict[str, str] = {
     "no_anchors": "needs a D(R,O) network trained without the contact map input",
-    "no_drake": "needs the collision-free joint fit of D(R,O) Grasp (not written)",
     "direct": "needs a [wrist, joints] diffusion model per hand (not trained)",
 }
 

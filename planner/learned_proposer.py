@@ -76,9 +76,12 @@ def dro_targets(
     wrist: np.ndarray,
     anchors: np.ndarray,
     seed: tuple[int, int],
+    min_closeness: float = MIN_CLOSENESS,
 ) -> LearnedTargets:
-    """D(R,O)'s hand point targets for one sample; `seed` (plan seed, sample index) seeds its
-    object input, so a sample's targets do not depend on which samples were solved before."""
+    """D(R,O)'s hand point targets for one sample, of the points predicted at least
+    `min_closeness` close to contact (0: every point); `seed` (plan seed, sample index) seeds
+    its object input, so a sample's targets do not depend on which samples were solved
+    before."""
     from learned.contact_map import object_input
     from learned.dro import predict
     from learned.text import encode
@@ -86,7 +89,7 @@ def dro_targets(
     net = _dro_net()
     features = object_input(obj.points, anchors, np.random.default_rng(list(seed))).features
     pred = predict(net, hand, wrist, features, encode([text])[0])
-    keep = np.flatnonzero(pred.closeness > MIN_CLOSENESS)
+    keep = np.flatnonzero(pred.closeness >= min_closeness)
     return LearnedTargets(keep, pred.targets[keep], pred.closeness[keep])
 
 

@@ -115,6 +115,11 @@ class PlannerSettings:
     # the same, 1-2 s more per pair
     learned_samples: int = 16
     learned_dro: bool = True  # D(R,O) point targets in the program (False: wrist + anchors)
+    # how learned proposals become configurations: "drake" (the grasp program: collision,
+    # coupling and joint-limit constraints) or "fit" (D(R,O) Grasp's way, the ablation
+    # without Drake: every hand point's D(R,O) target, joints fitted to them by least squares
+    # within the limits, no collision constraints; learned.joint_fit)
+    learned_solver: str = "drake"
     learned_seed: int = 0  # the samples' seed: the same seed, the same proposals
     learned_guidance: float | None = None  # classifier-free guidance; None: the model's own
     program: ProgramSettings = field(default_factory=ProgramSettings)
@@ -146,10 +151,20 @@ class PlannerSettings:
             )
         if self.proposer not in PROPOSERS:
             raise PlanningError(f"unknown proposer {self.proposer!r}; use one of {PROPOSERS}")
+        if self.learned_solver not in LEARNED_SOLVERS:
+            raise PlanningError(
+                f"unknown learned_solver {self.learned_solver!r}; use one of {LEARNED_SOLVERS}"
+            )
+        if self.learned_solver == "fit" and not self.learned_dro:
+            raise PlanningError(
+                'learned_solver="fit" fits the joints to D(R,O)\'s point targets; it needs '
+                "learned_dro=True"
+            )
         if self.liftup_reach <= 0:
             raise PlanningError(f"liftup_reach must be positive, got {self.liftup_reach}")
 
 
 RANKINGS = ("task", "epsilon")
 PROPOSERS = ("auto", "model", "learned")
+LEARNED_SOLVERS = ("drake", "fit")
 PROPOSAL_ORDERS = ("anchors", "clearance")

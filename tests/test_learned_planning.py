@@ -79,6 +79,20 @@ def test_without_dro_the_program_gets_wrist_and_anchors_only():
 
 
 @pytest.mark.slow
+def test_without_drake_the_joints_are_fitted_to_dro_targets():
+    """The ablation without Drake: every candidate comes from the joint fit, unconstrained,
+    and goes to validation however deep it is in the object."""
+    cloud = make_object("mug", 3).sample_cloud(4096).points
+    settings = PlannerSettings(learned_samples=2, max_candidates=1, learned_solver="fit")
+    result = plan_grasp(cloud, "hold the mug around its body", "allegro", settings)
+    assert result.candidates
+    for cand in result.candidates:
+        assert cand.solve.solver_status == "joint fit" and cand.solve.ok
+        assert cand.proposal.point_index is not None
+    assert any(c.validation for c in result.candidates)
+
+
+@pytest.mark.slow
 def test_cli_plans_a_cloud_file_from_a_sentence(tmp_path):
     cloud = tmp_path / "mug.npy"
     np.save(cloud, make_object("mug", 3).sample_cloud(4096).points)
