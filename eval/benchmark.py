@@ -54,10 +54,11 @@ METHODS: dict[str, dict[str, Any]] = {
     # D(R,O) -> every point's target -> joints fitted without collision constraints (D(R,O)
     # Grasp's way; the grasp program is not run)
     "no_drake": {"proposer": "learned", "learned_solver": "fit"},
+    # D(R,O) trained and run on a uniformly sampled object cloud (the paper's Table 3)
+    "no_anchors": {"proposer": "learned", "learned_dro_weights": "dro_no_anchors"},
     "model": {"proposer": "model"},  # the model-based planner, part labels given
 }
 NOT_BUILT: dict[str, str] = {
-    "no_anchors": "needs a D(R,O) network trained without the contact map input",
     "direct": "needs a [wrist, joints] diffusion model per hand (not trained)",
 }
 

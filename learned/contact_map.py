@@ -60,18 +60,25 @@ class ObjectInput:
 
 def object_input(
     points: np.ndarray,
-    anchors: np.ndarray,
+    anchors: np.ndarray | None,
     rng: np.random.Generator,
     n_importance: int = N_IMPORTANCE,
     n_farthest: int = N_FARTHEST,
 ) -> ObjectInput:
-    """The network's object input from a dense surface sample (N, 3) and the anchors (4, 3)."""
+    """The network's object input from a dense surface sample (N, 3) and the anchors (4, 3).
+    Without anchors (None: the paper's ablation without the contact map) every point comes
+    by farthest point sampling from one random start and Omega is 0."""
     points = np.asarray(points, dtype=np.float64)
     if points.ndim != 2 or points.shape[1] != 3 or len(points) < n_importance + n_farthest:
         raise ObjectError(
             f"object cloud of shape {points.shape}: need (N, 3) with N >= "
             f"{n_importance + n_farthest} surface points"
         )
+    if anchors is None:
+        start = rng.integers(len(points), size=1)
+        index = np.concatenate([start, farthest_from(points, start, n_importance + n_farthest - 1)])
+        features = np.concatenate([points[index], np.zeros((len(index), 1))], axis=1)
+        return ObjectInput(features.astype(np.float32), index)
     omega = contact_map(points, anchors)
     weights = omega + 1e-12
     picked = rng.choice(len(points), n_importance, replace=False, p=weights / weights.sum())

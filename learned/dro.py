@@ -34,6 +34,8 @@ from models.errors import DrograspError
 
 TEXT_DIM = 384  # learned.text.EMBED_DIM; fixed here so the network imports no text model
 WEIGHTS = Path(__file__).parent / "weights" / "dro.safetensors"
+# the ablation without anchors (DROConfig.anchors False), for eval.benchmark's no_anchors
+NO_ANCHOR_WEIGHTS = WEIGHTS.with_name("dro_no_anchors.safetensors")
 RETRAIN = "drograsp train dro --data data/grasps_v1 --out runs/dro (python -m learned.train_dro)"
 
 
@@ -56,6 +58,9 @@ class DROConfig:
     # a kernel feature: the distance from where each hand point is predicted to go (its input
     # position plus a learned offset) to the object point
     input_distance: bool = True
+    # the object input is sampled by the anchors' contact map (learned.contact_map); False: the
+    # paper's ablation without anchors (uniform farthest point samples, Omega 0)
+    anchors: bool = True
 
     def to_json(self) -> str:
         return json.dumps(asdict(self))
@@ -250,12 +255,15 @@ def save_weights(net: DRONet, path: str | Path, meta: dict | None = None) -> Non
 
 
 def load_weights(path: str | Path | None = None) -> Checkpoint:
-    """The network stored at `path` (default: the shipped weights). DROWeightsError naming the
-    file and the retraining command when it is missing, damaged or does not fit."""
+    """The network stored at `path` (default: the shipped weights; a bare name such as
+    "dro_no_anchors" is a file of learned/weights/). DROWeightsError naming the file and the
+    retraining command when it is missing, damaged or does not fit."""
     from safetensors import SafetensorError
     from safetensors.torch import load_file, safe_open
 
     path = Path(path) if path is not None else WEIGHTS
+    if path.parent == Path(".") and not path.suffix:
+        path = WEIGHTS.with_name(f"{path.name}.safetensors")
     if not path.is_file():
         raise DROWeightsError(f"D(R,O) weights {path} not found; train them with `{RETRAIN}`")
     try:

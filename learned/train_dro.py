@@ -32,7 +32,7 @@ import math
 import shutil
 import time
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -41,6 +41,7 @@ import torch
 from learned.contact_map import object_input
 from learned.dataset import DatasetError, load_split
 from learned.dro import (
+    NO_ANCHOR_WEIGHTS,
     WEIGHTS,
     DROConfig,
     DRONet,
@@ -63,6 +64,7 @@ class TrainConfig:
     data: str | list[str]  # a dataset folder, or several read as one
     out: str
     epochs: int = 20
+    steps: int | None = None  # stop (and save) after this many steps; the schedule spans `epochs`
     minutes: float | None = None  # stop (and save) after this much training time
     batch: int = 8
     lr: float = 1e-3
@@ -126,9 +128,10 @@ def dense_object(category: str, seed: int, n: int) -> tuple[np.ndarray, np.ndarr
 
 
 def row_object_input(
-    category: str, seed: int, anchors: np.ndarray, row_seed: int, n: int
+    category: str, seed: int, anchors: np.ndarray | None, row_seed: int, n: int
 ) -> tuple[np.ndarray, np.ndarray]:
-    """(512, 4) object input and (512, 3) normals for one row, deterministic in `row_seed`."""
+    """(512, 4) object input and (512, 3) normals for one row, deterministic in `row_seed`
+    (anchors None: the input without anchors, learned.contact_map.object_input)."""
     pts, nrm = dense_object(category, seed, n)
     inp = object_input(pts, anchors, np.random.default_rng(row_seed))
     return inp.features, nrm[inp.index].astype(np.float32)
@@ -151,9 +154,11 @@ def prepare(
     cache: Path | None = None,
     progress: bool = True,
     max_rows: int | None = None,
+    use_anchors: bool = True,
 ) -> Prepared:
     """The split's rows as arrays (optionally only some hands'), cached in `cache` (an .npz)
-    keyed by the dataset's meta.json and the options."""
+    keyed by the dataset's meta.json and the options; `use_anchors` False: object inputs without
+    the anchors' contact map (DROConfig.anchors)."""
     from models.hands import load_hand
 
     data = load_split(root, split)
@@ -172,7 +177,9 @@ def prepare(
     roots = [root] if isinstance(root, str | Path) else list(root)
     meta_text = b"".join((Path(r) / "meta.json").read_bytes() for r in roots)
     key = hashlib.sha256(
-        meta_text + json.dumps([split, hands, dense_points, rows.tolist()]).encode()
+        meta_text
+        + json.dumps([split, hands, dense_points, rows.tolist()]).encode()
+        + (b"" if use_anchors else b"no anchors")
     ).hexdigest()[:16]
     hand_names = [meta["hands"][i] for i in a["hand"][rows]]
     instructions = [meta["instructions"][i] for i in a["instruction"][rows]]
@@ -191,7 +198,11 @@ def prepare(
 
         for i in tqdm(range(len(rows)), desc=f"object inputs ({split})", disable=not progress):
             obj[i], normals[i] = row_object_input(
-                categories[i], int(seeds[i]), anchors[i], int(rows[i]), dense_points
+                categories[i],
+                int(seeds[i]),
+                anchors[i] if use_anchors else None,
+                int(rows[i]),
+                dense_points,
             )
         grasp_points = np.zeros((len(rows), 512, 3), np.float32)
         for name in sorted(set(hand_names)):
@@ -374,8 +385,9 @@ def train(cfg: TrainConfig, progress: bool = True) -> Path:
     out.mkdir(parents=True, exist_ok=True)
     hands = tuple(cfg.hands) if cfg.hands else None
     args = (hands, cfg.dense_points)
-    data = prepare(cfg.data, "train", *args, out / "cache_train.npz", progress, cfg.max_rows)
-    val = prepare(cfg.data, "val", *args, out / "cache_val.npz", progress, cfg.max_rows)
+    more = {"max_rows": cfg.max_rows, "use_anchors": cfg.net.anchors}
+    data = prepare(cfg.data, "train", *args, out / "cache_train.npz", progress, **more)
+    val = prepare(cfg.data, "val", *args, out / "cache_val.npz", progress, **more)
     val_rows = np.random.default_rng(cfg.seed).permutation(len(val))[: cfg.val_rows]
     torch.manual_seed(cfg.seed)
     net = DRONet(cfg.net)
@@ -387,7 +399,8 @@ def train(cfg: TrainConfig, progress: bool = True) -> Path:
     )
     step, history, elapsed = 0, [], 0.0
     ckpt = out / "checkpoint.pt"
-    settings = json.dumps(asdict(cfg) | {"out": None, "minutes": None}, sort_keys=True)
+    stops = {"out": None, "minutes": None, "steps": None}  # a resumed run may stop elsewhere
+    settings = json.dumps(asdict(cfg) | stops, sort_keys=True)
     if ckpt.is_file():
         state = torch.load(ckpt, weights_only=False)
         if state["settings"] != settings:
@@ -422,7 +435,8 @@ def train(cfg: TrainConfig, progress: bool = True) -> Path:
     budget = None if cfg.minutes is None else 60.0 * cfg.minutes
     bar = tqdm(total=total_steps, initial=step, desc="dro", disable=not progress)
     net.train()
-    while step < total_steps and (budget is None or elapsed < budget):
+    last = total_steps if cfg.steps is None else min(total_steps, cfg.steps)
+    while step < last and (budget is None or elapsed < budget):
         epoch, pos = divmod(step, per_epoch)
         order = np.random.default_rng([cfg.seed, epoch]).permutation(len(data))
         rows = order[pos * cfg.batch : (pos + 1) * cfg.batch]
@@ -470,9 +484,14 @@ def train(cfg: TrainConfig, progress: bool = True) -> Path:
     return weights
 
 
+NO_ANCHORS_HELP = (
+    "the ablation without anchors: object inputs by farthest point sampling, no contact map "
+    "(installs as dro_no_anchors.safetensors)"
+)
 OPTIONS = (
     ("epochs", int, "passes over the train rows"),
     ("minutes", float, "stop (and save) after this much training time"),
+    ("steps", int, "stop (and save) after this many steps (the schedule spans the epochs)"),
     ("batch", int, "grasps per step"),
     ("lr", float, "peak learning rate (one-cycle schedule)"),
     ("hand_points", int, "hand points per step whose rows of D enter the losses"),
@@ -492,8 +511,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     for name, kind, text in OPTIONS:
         parser.add_argument("--" + name.replace("_", "-"), type=kind, default=None, help=text)
     parser.add_argument("--hands", nargs="+", default=None, help="train on these hands only")
+    parser.add_argument("--no-anchors", action="store_true", help=NO_ANCHORS_HELP)
     parser.add_argument(
-        "--install", action="store_true", help=f"copy the final weights to {WEIGHTS}"
+        "--install", action="store_true", help=f"copy the final weights to {WEIGHTS.parent}"
     )
 
 
@@ -504,6 +524,8 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
     cfg = TrainConfig(data, args.out, **{k: v for k, v in given.items() if v is not None})
     if getattr(args, "hands", None):
         cfg.hands = tuple(args.hands)
+    if getattr(args, "no_anchors", False):
+        cfg.net = replace(cfg.net, anchors=False)
     return cfg
 
 
@@ -517,9 +539,10 @@ def run(args: argparse.Namespace) -> int:
         f"weights: {weights}\ncurve: {Path(args.out) / 'loss.png'}"
     )
     if getattr(args, "install", False):
-        WEIGHTS.parent.mkdir(parents=True, exist_ok=True)
-        shutil.copyfile(weights, WEIGHTS)
-        print(f"installed: {WEIGHTS}")
+        target = WEIGHTS if load_weights(weights).net.cfg.anchors else NO_ANCHOR_WEIGHTS
+        target.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(weights, target)
+        print(f"installed: {target}")
     return 0
 
 

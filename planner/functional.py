@@ -145,7 +145,16 @@ class FunctionalPlanner:
             pending = None
             if s.learned_dro:
                 key = (s.learned_seed, i)
-                pending = partial(dro_targets, obj, text, self.hand, wrist, anchors, key)
+                pending = partial(
+                    dro_targets,
+                    obj,
+                    text,
+                    self.hand,
+                    wrist,
+                    anchors,
+                    key,
+                    weights=s.learned_dro_weights,
+                )
             proposals.append(
                 Proposal(
                     wrist,

@@ -77,32 +77,35 @@ def dro_targets(
     anchors: np.ndarray,
     seed: tuple[int, int],
     min_closeness: float = MIN_CLOSENESS,
+    weights: str | None = None,
 ) -> LearnedTargets:
     """D(R,O)'s hand point targets for one sample, of the points predicted at least
     `min_closeness` close to contact (0: every point); `seed` (plan seed, sample index) seeds
     its object input, so a sample's targets do not depend on which samples were solved
-    before."""
+    before. `weights`: the D(R,O) network's file or name (None: the shipped one); a network
+    trained without anchors gets its object input without them."""
     from learned.contact_map import object_input
     from learned.dro import predict
     from learned.text import encode
 
-    net = _dro_net()
-    features = object_input(obj.points, anchors, np.random.default_rng(list(seed))).features
+    net = _dro_net(weights)
+    given = anchors if net.cfg.anchors else None
+    features = object_input(obj.points, given, np.random.default_rng(list(seed))).features
     pred = predict(net, hand, wrist, features, encode([text])[0])
     keep = np.flatnonzero(pred.closeness >= min_closeness)
     return LearnedTargets(keep, pred.targets[keep], pred.closeness[keep])
 
 
-_NET: list = []
+_NETS: dict = {}
 
 
-def _dro_net():
-    """The shipped D(R,O) network, loaded once per process."""
+def _dro_net(weights: str | None = None):
+    """A D(R,O) network (None: the shipped one), loaded once per process."""
     from learned.dro import load_weights
 
-    if not _NET:
-        _NET.append(load_weights().net)
-    return _NET[0]
+    if weights not in _NETS:
+        _NETS[weights] = load_weights(weights).net
+    return _NETS[weights]
 
 
 def anchor_closure(anchors: np.ndarray, normals: np.ndarray, obj: ObjectModel) -> float:

@@ -115,6 +115,9 @@ class PlannerSettings:
     # the same, 1-2 s more per pair
     learned_samples: int = 16
     learned_dro: bool = True  # D(R,O) point targets in the program (False: wrist + anchors)
+    # the D(R,O) weights: None the shipped network, else a file or a name in learned/weights/
+    # ("dro_no_anchors": the ablation trained without the anchors' contact map)
+    learned_dro_weights: str | None = None
     # how learned proposals become configurations: "drake" (the grasp program: collision,
     # coupling and joint-limit constraints) or "fit" (D(R,O) Grasp's way, the ablation
     # without Drake: every hand point's D(R,O) target, joints fitted to them by least squares

@@ -236,3 +236,30 @@ def test_cli_train_dro_options_reach_the_config():
     cfg = train_dro.config_from_args(args)
     assert (cfg.data, cfg.out, cfg.epochs, cfg.hands) == ("D", "O", 2, ("leap",))
     assert cfg.batch == train_dro.TrainConfig("", "").batch  # left out: the config's default
+
+
+def test_cli_train_dro_steps_and_the_ablation_without_anchors():
+    from planner.cli import build_parser
+
+    argv = ["train", "dro", "--data", "D", "--out", "O", "--steps", "5", "--no-anchors"]
+    cfg = train_dro.config_from_args(build_parser(argv).parse_args(argv))
+    assert cfg.steps == 5 and cfg.net.anchors is False
+    assert train_dro.TrainConfig("", "").net.anchors is True
+
+
+@needs_data
+def test_training_without_anchors_stops_at_its_steps(tmp_path, monkeypatch):
+    """The ablation's object inputs carry no contact map, its weights say so, and --steps
+    stops the run early without changing the schedule (a resumed run keeps its settings)."""
+    monkeypatch.setattr(train_dro, "embed", _fake_embed)
+    net = replace(TINY, anchors=False)
+    cfg = train_dro.TrainConfig(
+        str(DATA), str(tmp_path), epochs=1, batch=2, max_rows=6, val_rows=2, steps=1, net=net
+    )
+    weights = train_dro.train(cfg, progress=False)
+    ckpt = load_weights(weights)
+    assert ckpt.meta["steps"] == 1 and ckpt.net.cfg.anchors is False
+    with np.load(tmp_path / "cache_train.npz") as cache:
+        assert np.all(cache["obj"][..., 3] == 0)
+    train_dro.train(replace(cfg, steps=2), progress=False)  # resumes: same settings
+    assert load_weights(weights).meta["steps"] == 2

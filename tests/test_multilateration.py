@@ -93,3 +93,14 @@ def test_object_input_concentrates_on_anchors():
     near = np.min(np.linalg.norm(inp.features[:256, None, :3] - anchors[None], axis=2), axis=1)
     assert np.median(near) < 0.02  # importance half near the anchors
     assert len(np.unique(inp.index)) == 512
+
+
+def test_object_input_without_anchors_is_farthest_points_and_no_contact_map():
+    rng = np.random.default_rng(3)
+    points = rng.uniform(-0.05, 0.05, (2000, 3))
+    first = object_input(points, None, np.random.default_rng(0))
+    again = object_input(points, None, np.random.default_rng(0))
+    assert first.features.shape == (512, 4) and len(np.unique(first.index)) == 512
+    assert np.all(first.features[:, 3] == 0)
+    assert np.array_equal(first.index, again.index)  # seeded
+    assert np.allclose(first.features[:, :3], points[first.index])

@@ -74,10 +74,16 @@ def register(sub: argparse._SubParsersAction) -> None:
     d.add_argument("--out", required=True, metavar="DIR", help="run folder (checkpoints, curve)")
     d.add_argument("--minutes", type=positive_float, default=None, help="training time budget")
     d.add_argument("--epochs", type=positive_int, default=None, help="default 20")
+    d.add_argument("--steps", type=positive_int, default=None, help="stop after this many steps")
     d.add_argument("--batch", type=positive_int, default=None, help="grasps per step (default 8)")
     d.add_argument("--seed", type=non_negative_int, default=None)
     d.add_argument("--threads", type=positive_int, default=None, help="torch threads (default 1)")
     d.add_argument("--hands", nargs="+", default=None, help="train on these hands' rows only")
+    d.add_argument(
+        "--no-anchors",
+        action="store_true",
+        help="the ablation without anchors (farthest point object input, no contact map)",
+    )
     d.add_argument("--install", action="store_true", help="copy the weights to learned/weights/")
     d.set_defaults(func=run_dro)
 
