@@ -76,13 +76,11 @@ def dro_targets(
     wrist: np.ndarray,
     anchors: np.ndarray,
     seed: tuple[int, int],
-    min_closeness: float = MIN_CLOSENESS,
     weights: str | None = None,
 ) -> LearnedTargets:
-    """D(R,O)'s hand point targets for one sample, of the points predicted at least
-    `min_closeness` close to contact (0: every point); `seed` (plan seed, sample index) seeds
-    its object input, so a sample's targets do not depend on which samples were solved
-    before. `weights`: the D(R,O) network's file or name (None: the shipped one); a network
+    """D(R,O)'s hand point targets for one sample; `seed` (plan seed, sample index) seeds its
+    object input, so a sample's targets do not depend on which samples were solved before.
+    `weights`: the D(R,O) network's file or name (None: the shipped one); a network
     trained without anchors gets its object input without them."""
     from learned.contact_map import object_input
     from learned.dro import predict
@@ -92,7 +90,7 @@ def dro_targets(
     given = anchors if net.cfg.anchors else None
     features = object_input(obj.points, given, np.random.default_rng(list(seed))).features
     pred = predict(net, hand, wrist, features, encode([text])[0])
-    keep = np.flatnonzero(pred.closeness >= min_closeness)
+    keep = np.flatnonzero(pred.closeness > MIN_CLOSENESS)
     return LearnedTargets(keep, pred.targets[keep], pred.closeness[keep])
 
 
