@@ -97,7 +97,9 @@ def evaluate(
     torch.set_num_threads(1)
     ckpt = load_weights(weights)
     net = ckpt.net
-    data = prepare(data_root, split, tuple(hands) if hands else None, progress=False)
+    # a network trained without anchors gets its object input without them
+    chosen = tuple(hands) if hands else None
+    data = prepare(data_root, split, chosen, progress=False, use_anchors=net.cfg.anchors)
     rng = np.random.default_rng(seed)
     records: dict[str, HandRecord] = {}
     names = np.array(data.hands)
