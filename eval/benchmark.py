@@ -6,7 +6,11 @@ Every method plans the same (object, instruction, hand) pairs in one run. The le
 see the object without its part labels (the same mesh, so the same collision pieces and the
 same MuJoCo validation); the part a grasp touches is scored afterwards with the labels they never
 saw (the fingertip vote of planner.labels). The model-based planner is given the labels (its
-oracle). Per hand and method:
+oracle). Methods (METHODS): `learned` (interaction diffusion -> D(R,O) -> Drake -> MuJoCo),
+`no_dro` (wrist and anchors straight into Drake), `no_anchors` (D(R,O) trained and run on 512
+farthest points with no contact map, learned/weights/dro_no_anchors; Drake still gets the
+anchors), `no_drake` (D(R,O)'s targets, joints fitted to them without collision constraints,
+as D(R,O) Grasp does: learned.joint_fit) and `model`. Per hand and method:
 
 - first: the first validated candidate holds and touches the instructed part (the paper's
   first-sample success);
