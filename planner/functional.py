@@ -23,7 +23,7 @@ from models.grasp import Grasp
 from models.hands import HandModel, load_hand
 from models.objects import Instruction, ObjectModel, parse_instruction
 from models.objects.intents import Definition
-from models.reproducible import rounded, rounded_within
+from models.reproducible import rounded
 from planner.grasp_program import GraspProgram, GraspTargets, SolveResult, grasp_program
 from planner.intent import check_configuration, intent_definition
 from planner.labels import grasp_part
@@ -260,7 +260,9 @@ class FunctionalPlanner:
             proposal.point_weights, proposal.pending_targets = made.weights, None
             times["dro"] = time.perf_counter() - t0
         if proposal.kind == "learned" and self.settings.learned_solver == "fit":
-            solved = _fit(program, proposal)
+            from planner.learned_proposer import fitted
+
+            solved = fitted(program, proposal)
         else:
             solved = program.solve(
                 GraspTargets(
@@ -298,42 +300,6 @@ class FunctionalPlanner:
         cand.grasp, cand.success, cand.part = done.grasp, done.success, done.part
         cand.validation = done.validation
         cand.times.update(done.times)
-
-
-def _fit(program: GraspProgram, proposal: Proposal) -> SolveResult:
-    """D(R,O) Grasp's configuration for a learned proposal, the ablation without Drake: the
-    wrist and joints fitted to D(R,O)'s point targets (learned.joint_fit), no collision
-    constraints. The targets and their closeness weights are the ones the grasp program gets:
-    D(R,O) Grasp fits every point, but this network learns distances clipped at a few
-    centimetres, so far points' targets are guesses (all 512 unweighted: 3-4 cm rms misfit on
-    a mug). Penetration and anchor error are measured, not constrained: every fit goes on to
-    MuJoCo, as in D(R,O) Grasp."""
-    from learned.joint_fit import fit_configuration
-
-    hand = program.hand
-    fit = fit_configuration(
-        hand,
-        proposal.wrist,
-        proposal.q,
-        proposal.point_index,
-        proposal.point_targets,
-        proposal.point_weights,
-    )
-    wrist = rounded(fit.wrist)  # its quaternion is normalised by the fit
-    q = rounded_within(fit.q, hand.lower, hand.upper)
-    distance = program.hand_object_distance(wrist, q)
-    return SolveResult(
-        wrist=wrist,
-        q=q,
-        ok=True,
-        min_distance=distance,
-        anchor_error=program.anchor_error(wrist, q, proposal.anchors),
-        solver_success=True,
-        solver_status="joint fit",
-        solve_time=fit.fit_time,
-        message=f"points {fit.rms_error * 1000:.1f} mm rms from D(R,O)'s targets; "
-        f"no collision constraints (distance {distance * 1000:.1f} mm)",
-    )
 
 
 TABLE_GAP = 0.001  # m: the table's top above the object's lowest point (hand 1.5 mm above)

@@ -7,7 +7,8 @@ near contact each point is predicted). Both go to the same grasp program as the 
 proposals (planner.functional): anchors with their surface normals, the open pose as the
 starting configuration, and the point targets the program pulls toward (`point_weights`:
 closeness, so far points weigh little). The samples are solved best anchor closure first, as
-the model-based ones.
+the model-based ones. `fitted` is the ablation without Drake (`PlannerSettings.learned_solver`
+"fit"): the joints fitted to the targets with no collision constraints.
 """
 
 from __future__ import annotations
@@ -20,7 +21,10 @@ from scipy.spatial import cKDTree
 
 from models.hands import HandModel
 from models.objects import ObjectModel
+from models.reproducible import rounded, rounded_within
+from planner.grasp_program import GraspProgram, SolveResult
 from planner.quality import contact_quality
+from planner.results import Proposal
 
 # D(R,O) targets of hand points predicted at least this close to contact (closeness, e^-1 at
 # 1 cm: about 3 cm) enter the program; the rest are guesswork (learned.dro.closeness)
@@ -110,3 +114,39 @@ def anchor_closure(anchors: np.ndarray, normals: np.ndarray, obj: ObjectModel) -
     """Epsilon of the anchors pushing along their inward normals about the object's centre:
     the solve order, as for the model-based proposals."""
     return float(contact_quality(anchors, -normals, obj.points.mean(axis=0)).epsilon)
+
+
+def fitted(program: GraspProgram, proposal: Proposal) -> SolveResult:
+    """D(R,O) Grasp's configuration for a learned proposal, the ablation without Drake: the
+    wrist and joints fitted to D(R,O)'s point targets (learned.joint_fit), no collision
+    constraints. The targets and their closeness weights are the ones the grasp program gets:
+    D(R,O) Grasp fits every point, but this network learns distances clipped at a few
+    centimetres, so far points' targets are guesses (all 512 unweighted: 3-4 cm rms misfit on
+    a mug). Penetration and anchor error are measured, not constrained: every fit goes on to
+    MuJoCo, as in D(R,O) Grasp."""
+    from learned.joint_fit import fit_configuration
+
+    hand = program.hand
+    fit = fit_configuration(
+        hand,
+        proposal.wrist,
+        proposal.q,
+        proposal.point_index,
+        proposal.point_targets,
+        proposal.point_weights,
+    )
+    wrist = rounded(fit.wrist)  # its quaternion is normalised by the fit
+    q = rounded_within(fit.q, hand.lower, hand.upper)
+    distance = program.hand_object_distance(wrist, q)
+    return SolveResult(
+        wrist=wrist,
+        q=q,
+        ok=True,
+        min_distance=distance,
+        anchor_error=program.anchor_error(wrist, q, proposal.anchors),
+        solver_success=True,
+        solver_status="joint fit",
+        solve_time=fit.fit_time,
+        message=f"points {fit.rms_error * 1000:.1f} mm rms from D(R,O)'s targets; "
+        f"no collision constraints (distance {distance * 1000:.1f} mm)",
+    )
