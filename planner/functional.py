@@ -27,6 +27,7 @@ from models.reproducible import rounded
 from planner.grasp_program import GraspProgram, GraspTargets, SolveResult, grasp_program
 from planner.intent import check_configuration, intent_definition
 from planner.labels import grasp_part
+from planner.learned_proposer import anchor_closure, dro_targets, fitted, learned_proposals
 from planner.model_proposer import HandGeometry, ModelProposer
 from planner.quality import contact_quality
 from planner.results import CandidateResult, PlanResult, Proposal
@@ -126,7 +127,6 @@ class FunctionalPlanner:
         intent is checked, only where the object has part labels that name that part: on an
         unlabelled cloud a grasp that holds is success."""
         from learned.understand import understand
-        from planner.learned_proposer import anchor_closure, dro_targets, learned_proposals
 
         s = self.settings
         start = time.perf_counter()
@@ -260,8 +260,6 @@ class FunctionalPlanner:
             proposal.point_weights, proposal.pending_targets = made.weights, None
             times["dro"] = time.perf_counter() - t0
         if proposal.kind == "learned" and self.settings.learned_solver == "fit":
-            from planner.learned_proposer import fitted
-
             solved = fitted(program, proposal)
         else:
             solved = program.solve(
