@@ -11,6 +11,7 @@ the sentences they produce (tests/test_interaction.py checks both).
 from __future__ import annotations
 
 import random
+import re
 from dataclasses import dataclass
 
 from models.errors import InstructionError
@@ -78,7 +79,7 @@ def _plural(noun: str) -> str:
 
 
 def _render(template: str, verb: str, req: Request) -> str:
-    return template.format(
+    text = template.format(
         Intent=req.intent,
         verb=verb,
         Verb=verb[0].upper() + verb[1:],
@@ -86,6 +87,7 @@ def _render(template: str, verb: str, req: Request) -> str:
         objs=_plural(req.noun),
         part=req.part,
     )
+    return re.sub(r"\b([Aa]) (?=[aeiou])", r"\1n ", text)  # "an item", "an object"
 
 
 def _check(req: Request) -> None:
@@ -106,6 +108,20 @@ def train_paraphrases(req: Request) -> list[str]:
     out = [_render(TRAIN_TEMPLATES[0], TRAIN_VERBS[req.intent][0], req)]
     for t in TRAIN_TEMPLATES[1:]:
         out += [_render(t, v, req) for v in TRAIN_VERBS[req.intent]]
+    return list(dict.fromkeys(out))
+
+
+# nouns that name no category: a share of training steps words the request with one of these, so
+# the model must find the part from the cloud and the part word, not from the category's name
+# (a held-out category's name is a word the model never saw with a grasp)
+GENERIC_NOUNS: tuple[str, ...] = ("object", "thing", "item")
+
+
+def generic_paraphrases(req: Request) -> list[str]:
+    """Every training rewording of the request with the object's noun replaced by a generic one."""
+    out: list[str] = []
+    for noun in GENERIC_NOUNS:
+        out += train_paraphrases(Request(req.intent, noun, req.part))
     return list(dict.fromkeys(out))
 
 

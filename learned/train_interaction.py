@@ -36,7 +36,7 @@ from learned.interaction import (
     encode_x,
     hand_points,
 )
-from learned.paraphrase import request_of, train_paraphrases
+from learned.paraphrase import generic_paraphrases, request_of, train_paraphrases
 from learned.pointnet import grouping
 from learned.weights import WEIGHTS_DIR, load_weights, save_weights
 
@@ -64,6 +64,9 @@ class TrainSettings:
     # 0.5 measured on grasps_v1 test: part accuracy 74.9 -> 83.6%, instruction sensitivity
     # 31 -> 57% (1434 vs 1302 steps, FiLM on both)
     balance: float = 0.5
+    # share of steps whose instruction names no category ("Use the object by its handle"):
+    # teaches the part word and the shape over the category's name, for unseen categories
+    generic_share: float = 0.2
     samples_per_object: int = 4  # cached 2048-point samples per object
     checkpoint_minutes: float = 3.0
     threads: int = 1
@@ -197,15 +200,23 @@ class Batcher:
         self.row_weights = weights / weights.sum()
         # paraphrases per instruction: index 0 is the canonical text
         self.texts: list[list[str]] = []
+        self.generic: list[list[str]] = []  # the same requests naming no category
         for t in self.instr_names:
             try:
-                self.texts.append([t, *train_paraphrases(request_of(t))[1:]])
+                req = request_of(t)
             except ValueError:  # an instruction the parser cannot read: canonical only
                 self.texts.append([t])
-        flat = sorted({t for ts in self.texts for t in ts})
+                self.generic.append([])
+                continue
+            self.texts.append([t, *train_paraphrases(req)[1:]])
+            self.generic.append(generic_paraphrases(req) if settings.generic_share > 0 else [])
+        flat = sorted({t for ts in self.texts + self.generic for t in ts})
         vecs = encode(flat)
         lookup = {t: v for t, v in zip(flat, vecs, strict=True)}
         self.vecs = [np.stack([lookup[t] for t in ts]) for ts in self.texts]
+        self.generic_vecs = [
+            np.stack([lookup[t] for t in ts]) if ts else None for ts in self.generic
+        ]
         for cat, seed in sorted(set(zip(self.categories, self.seeds, strict=True))):
             cache.groups(cat, seed, config)
         self.wrist = a["wrist"][rows].astype(np.float64)
@@ -219,6 +230,15 @@ class Batcher:
 
     def __len__(self) -> int:
         return len(self.rows)
+
+    def _text(self, instr: int, pyrng: random.Random) -> np.ndarray:
+        """One wording's embedding: generic noun, canonical form or a training paraphrase."""
+        generic = self.generic_vecs[instr]
+        if generic is not None and pyrng.random() < self.settings.generic_share:
+            return generic[pyrng.randrange(len(generic))]
+        choices = self.vecs[instr]
+        canon = pyrng.random() < self.settings.canonical_share or len(choices) == 1
+        return choices[0 if canon else pyrng.randrange(1, len(choices))]
 
     def make(self, picks: np.ndarray, rng: np.random.Generator, pyrng: random.Random) -> dict:
         xyz, xs, texts = [], [], []
@@ -237,9 +257,7 @@ class Batcher:
             g = self.cache.groups(cat, seed, self.config)[k]
             for key in groups:
                 groups[key].append(getattr(g, key))
-            choices = self.vecs[self.instr_index[i]]
-            canon = pyrng.random() < self.settings.canonical_share or len(choices) == 1
-            texts.append(choices[0 if canon else pyrng.randrange(1, len(choices))])
+            texts.append(self._text(self.instr_index[i], pyrng))
         return {
             "xyz": torch.from_numpy(np.stack(xyz)).float(),
             "groups": {k: torch.from_numpy(np.stack(v)) for k, v in groups.items()},
@@ -501,7 +519,9 @@ def _val_batch(data, cache, config, settings) -> Batcher | None:
     if len(rows) == 0:
         return None
     rows = rows[np.random.default_rng(0).permutation(len(rows))[:256]]
-    quiet = TrainSettings(**{**asdict(settings), "augment": False, "canonical_share": 1.0})
+    quiet = TrainSettings(
+        **{**asdict(settings), "augment": False, "canonical_share": 1.0, "generic_share": 0.0}
+    )
     return Batcher(val, rows, cache, config, quiet)
 
 

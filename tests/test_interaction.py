@@ -23,8 +23,10 @@ from learned.interaction import (
 )
 from learned.paraphrase import (
     EVAL_TEMPLATES,
+    GENERIC_NOUNS,
     TRAIN_TEMPLATES,
     eval_paraphrases,
+    generic_paraphrases,
     request_of,
     train_paraphrases,
 )
@@ -237,3 +239,29 @@ def test_bad_inputs(mug: np.ndarray, tiny_model: InteractionModel) -> None:
         tiny_model.sample(mug, "   ", "shadow", 2)
     with pytest.raises(ValueError, match="positive integer"):
         tiny_model.sample(mug, "Use a mug by handle", "shadow", 0)
+
+
+def test_generic_wordings_name_no_category_and_stay_apart_from_evaluation() -> None:
+    nouns = {request_of(i.text).noun for c in TABLE for i in instructions(c)}
+    for category in TABLE:
+        for instr in instructions(category)[:2]:
+            req = request_of(instr.text)
+            generic = generic_paraphrases(req)
+            assert generic and len(set(generic)) == len(generic)
+            assert not any(n in t.split() for t in generic for n in nouns - {req.part})
+            assert all(req.part in t for t in generic)
+            assert all(any(g in t for g in GENERIC_NOUNS) for t in generic)
+            assert not {t.lower() for t in generic} & {t.lower() for t in eval_paraphrases(req)}
+
+
+def test_cli_generic_share_reaches_the_settings_and_is_checked(capsys) -> None:
+    from planner.cli import build_parser
+    from planner.commands.train import interaction_setup
+
+    argv = ["train", "interaction", "--data", "D", "--out", "O", "--generic-share", "0.5"]
+    _, settings = interaction_setup(build_parser(argv).parse_args(argv))
+    assert settings.generic_share == 0.5
+    bad = argv[:-1] + ["1.5"]
+    with pytest.raises(SystemExit) as exc:
+        build_parser(bad).parse_args(bad)
+    assert exc.value.code == 2 and "between 0 and 1" in capsys.readouterr().err

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from planner.commands.args import non_negative_int, positive_float, positive_int
+from planner.commands.args import non_negative_int, positive_float, positive_int, share
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -53,6 +53,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         "1 uniform over instructions (default 0.5)",
     )
     i.add_argument(
+        "--generic-share",
+        type=share,
+        default=0.2,
+        help="share of steps whose instruction names no category, e.g. 'Use the object by its "
+        "handle' (default 0.2; 0 turns it off)",
+    )
+    i.add_argument(
         "--install",
         action="store_true",
         help="copy the final weights to learned/weights/ (the shipped model)",
@@ -88,9 +95,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     d.set_defaults(func=run_dro)
 
 
-def run_interaction(args: argparse.Namespace) -> int:
+def interaction_setup(args: argparse.Namespace):
+    """The model config and training settings the command line asks for."""
     from learned.interaction import InteractionConfig
-    from learned.train_interaction import TrainSettings, train
+    from learned.train_interaction import TrainSettings
 
     config = InteractionConfig()
     if args.width is not None:
@@ -105,7 +113,15 @@ def run_interaction(args: argparse.Namespace) -> int:
         threads=args.threads,
         checkpoint_minutes=args.checkpoint_minutes,
         balance=args.balance,
+        generic_share=args.generic_share,
     )
+    return config, settings
+
+
+def run_interaction(args: argparse.Namespace) -> int:
+    from learned.train_interaction import train
+
+    config, settings = interaction_setup(args)
     data = args.data[0] if len(args.data) == 1 else args.data
     result = train(data, args.out, settings, config, install=args.install)
     val = "n/a" if result.val_loss is None else f"{result.val_loss:.4f}"
