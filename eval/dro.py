@@ -206,7 +206,7 @@ def _table(result: dict) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m eval.dro", description=__doc__)
-    parser.add_argument("--data", default="data/grasps_v1")
+    parser.add_argument("--data", default="data/grasps_v2")
     parser.add_argument("--split", default="test")
     parser.add_argument("--weights", default=None, help="default: the shipped weights")
     parser.add_argument("--rows-per-hand", type=int, default=40)

@@ -185,7 +185,7 @@ def score(
 
 def run(
     split: str,
-    data: str = "data/grasps_v1",
+    data: str = "data/grasps_v2",
     paraphrase: bool = False,
     rotate: bool = False,
     weights: str | None = None,
@@ -375,7 +375,7 @@ def print_table(report: Report) -> None:
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--split", choices=["test", "val", "heldout", "train"], default="test")
-    p.add_argument("--data", default="data/grasps_v1")
+    p.add_argument("--data", default="data/grasps_v2")
     p.add_argument("--paraphrase", action="store_true", help="evaluation-only paraphrases")
     p.add_argument("--rotate", action="store_true", help="any yaw, tilt <= 30 degrees")
     p.add_argument("--weights", default=None, help="folder of interaction.safetensors")

@@ -38,7 +38,7 @@ from models.errors import DrograspError, ObjectError
 SCALE = 10.0  # network units per metre
 X_DIM = 21  # translation 3 + rotation 6 + anchors 12
 NAME = "interaction"
-RETRAIN = "drograsp train interaction --data data/grasps_v1 --out runs/interaction --install"
+RETRAIN = "drograsp train interaction --data data/grasps_v2 --out runs/interaction --install"
 
 
 @dataclass

@@ -1,6 +1,6 @@
 """Training of the D(R,O) network on the functional grasp dataset.
 
-    python -m learned.train_dro --data data/grasps_v1 --out runs/dro [--minutes 15]
+    python -m learned.train_dro --data data/grasps_v2 --out runs/dro [--minutes 15]
 
 Each dataset row gives one sample: the object (regenerated once per (category, seed) and
 subsampled to `dense_points`), its 512 x 4 input from the row's anchors (learned.contact_map,

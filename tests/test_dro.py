@@ -26,7 +26,7 @@ from learned.dro import (
 from models.hands import available_hands, load_hand
 from planner.grasp_program import GraspTargets, grasp_program
 
-DATA = Path(__file__).resolve().parents[1] / "data" / "grasps_v1"
+DATA = Path(__file__).resolve().parents[1] / "data" / "grasps_v2"
 TINY = DROConfig(edge_widths=(16, 16), feature_dim=32, kernel_hidden=16, k=8)
 
 
@@ -88,7 +88,7 @@ def _fake_embed(texts: list[str]) -> np.ndarray:
     return np.asarray(out, np.float32)
 
 
-needs_data = pytest.mark.skipif(not (DATA / "meta.json").is_file(), reason="no dataset v1")
+needs_data = pytest.mark.skipif(not (DATA / "meta.json").is_file(), reason="no dataset v2")
 
 
 @needs_data

@@ -35,7 +35,7 @@ from learned.weights import WeightsError
 from models.errors import InstructionError, ObjectError
 from models.objects import TABLE, instructions, make_object
 
-DATA = Path(__file__).resolve().parents[1] / "data" / "grasps_v1"
+DATA = Path(__file__).resolve().parents[1] / "data" / "grasps_v2"
 TINY = InteractionConfig(
     points=512,
     object_levels=((64, 8, (16, 32)), (16, 8, (32, 32))),
@@ -114,7 +114,7 @@ def test_sample_shapes_and_unit_quaternions(mug: np.ndarray, tiny_model: Interac
 
 
 # ---- over-fitting ------------------------------------------------------------------------------
-@pytest.mark.skipif(not DATA.is_dir(), reason="data/grasps_v1 absent")
+@pytest.mark.skipif(not DATA.is_dir(), reason="data/grasps_v2 absent")
 def test_tiny_overfit() -> None:
     """Four grasps of one mug learned to a small noise error in seconds; samples then land
     near the taught grasps."""
@@ -203,7 +203,7 @@ def _mini_dataset(root: Path) -> None:
     (root / "meta.json").write_text(json.dumps(meta), encoding="utf-8")
 
 
-@pytest.mark.skipif(not DATA.is_dir(), reason="data/grasps_v1 absent")
+@pytest.mark.skipif(not DATA.is_dir(), reason="data/grasps_v2 absent")
 def test_training_checkpoint_resume(tmp_path: Path) -> None:
     from learned.train_interaction import TrainSettings, train
 

@@ -13,9 +13,9 @@ from models.paths import input_folder, output_folder
 from planner.commands.args import non_negative_int, positive_int
 from planner.commands.jobs import add_backend_arguments, add_job_arguments, hands_arg
 
-# Dataset v1 lives in the source checkout (objects regenerate from seeds; the installed package
+# The shipped dataset lives in the source checkout (objects regenerate from seeds; the installed package
 # does not carry it): the default is relative to the current folder, the checkout's root.
-DEFAULT_ROOT = Path("data") / "grasps_v1"
+DEFAULT_ROOT = Path("data") / "grasps_v2"
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -89,7 +89,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         nargs="?",
         default=str(DEFAULT_ROOT),
         metavar="DIR",
-        help=f"dataset folder (default {DEFAULT_ROOT}, dataset v1 when run from the checkout)",
+        help=f"dataset folder (default {DEFAULT_ROOT}, the shipped dataset when run from the checkout)",
     )
     i.add_argument("--json", action="store_true")
     i.set_defaults(func=run_info)

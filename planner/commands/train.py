@@ -27,7 +27,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         required=True,
         nargs="+",
         metavar="DIR",
-        help="dataset folder(s); several read as one (e.g. data/grasps_v1 data/grasps_v2)",
+        help="dataset folder(s); several read as one (e.g. data/grasps_v2 my_grasps)",
     )
     i.add_argument("--out", required=True, metavar="DIR", help="run folder (checkpoints, curve)")
     i.add_argument(
@@ -76,7 +76,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         required=True,
         nargs="+",
         metavar="DIR",
-        help="dataset folder(s); several read as one (e.g. data/grasps_v1 data/grasps_v2)",
+        help="dataset folder(s); several read as one (e.g. data/grasps_v2 my_grasps)",
     )
     d.add_argument("--out", required=True, metavar="DIR", help="run folder (checkpoints, curve)")
     d.add_argument("--minutes", type=positive_float, default=None, help="training time budget")
