@@ -39,6 +39,13 @@ SCALE = 10.0  # network units per metre
 X_DIM = 21  # translation 3 + rotation 6 + anchors 12
 NAME = "interaction"
 RETRAIN = "drograsp train interaction --data data/grasps_v2 --out runs/interaction --install"
+# the ablation of direct diffusion (the paper's Scene-Diffuser comparison): the same encoders,
+# text and data, but the model draws [wrist, joints] and no solver follows
+DIRECT_NAME = "direct"
+DIRECT_RETRAIN = (
+    "drograsp train interaction --target joints --data data/grasps_v2 --out runs/direct --install"
+)
+TARGETS = ("anchors", "joints")
 
 
 @dataclass
@@ -68,6 +75,25 @@ class InteractionConfig:
     # each block's norms scaled and shifted by (time + object, hand and text summary), so the
     # instruction acts at every layer, not only through one token (configs without it: off)
     film: bool = True
+    # what is drawn beside the wrist: "anchors" (4 contact points: the pipeline's first stage)
+    # or "joints" (the hand's joint values scaled to [-1, 1] by its limits, zero-padded to
+    # joint_slots: the direct-diffusion ablation)
+    target: str = "anchors"
+    joint_slots: int = 24
+
+    def __post_init__(self) -> None:
+        if self.target not in TARGETS:
+            raise ValueError(f"unknown target {self.target!r}; one of {TARGETS}")
+
+    @property
+    def x_dim(self) -> int:
+        """Numbers per sample: wrist (9) and the target."""
+        return 9 + (12 if self.target == "anchors" else self.joint_slots)
+
+    @property
+    def name(self) -> str:
+        """The weights' file name: interaction, or direct for the joints target."""
+        return NAME if self.target == "anchors" else DIRECT_NAME
 
     def levels(self, which: str) -> tuple[LevelConfig, LevelConfig]:
         raw = self.object_levels if which == "object" else self.hand_levels
@@ -153,15 +179,45 @@ def encode_x(wrist: np.ndarray, anchors: np.ndarray, frame: Frame) -> np.ndarray
     return np.concatenate([t, r6, a.reshape(-1, 12)], axis=1)
 
 
-def decode_x(x: np.ndarray, frame: Frame) -> tuple[np.ndarray, np.ndarray]:
-    """(n, 21) canonical network units -> wrists (n, 7) and anchors (n, 4, 3) in the input frame."""
+def decode_wrist(x: np.ndarray, frame: Frame) -> np.ndarray:
+    """(n, 9+) canonical network units -> wrists (n, 7) in the input frame."""
     x = np.asarray(x, dtype=np.float64)
     t = frame.from_canonical(x[:, :3] / SCALE)
     rm = frame.rot.T @ matrix_from_rot6(x[:, 3:9])
     q = Rotation.from_matrix(rm).as_quat(scalar_first=True)
     q *= np.where(q[:, :1] < 0, -1.0, 1.0)  # qw >= 0, one of the two equal quaternions
-    a = frame.from_canonical(x[:, 9:].reshape(-1, 4, 3) / SCALE)
-    return np.concatenate([t, q], axis=1), a
+    return np.concatenate([t, q], axis=1)
+
+
+def decode_x(x: np.ndarray, frame: Frame) -> tuple[np.ndarray, np.ndarray]:
+    """(n, 21) canonical network units -> wrists (n, 7) and anchors (n, 4, 3) in the input frame."""
+    x = np.asarray(x, dtype=np.float64)
+    a = frame.from_canonical(x[:, 9:21].reshape(-1, 4, 3) / SCALE)
+    return decode_wrist(x, frame), a
+
+
+def encode_joints(q: np.ndarray, lower: np.ndarray, upper: np.ndarray, slots: int) -> np.ndarray:
+    """Joint values (n, dof) -> (n, slots): scaled to [-1, 1] by the limits, zero-padded (the
+    same layout for every hand; the hand input says which hand it is)."""
+    q = np.asarray(q, dtype=np.float64).reshape(len(q), -1)
+    dof = len(lower)
+    if dof > slots:
+        raise ValueError(f"a hand of {dof} joints needs joint_slots >= {dof} (config has {slots})")
+    half = np.maximum((np.asarray(upper) - np.asarray(lower)) / 2, 1e-6)
+    out = np.zeros((len(q), slots))
+    out[:, :dof] = (q[:, :dof] - (np.asarray(upper) + np.asarray(lower)) / 2) / half
+    return out
+
+
+def decode_joints(z: np.ndarray, hand: Any) -> np.ndarray:
+    """(n, slots) -> joint values (n, dof) within the hand's limits and on its couplings (the
+    nearest coupled configuration, then clipped: the limits keep the plan ratio)."""
+    lower, upper = np.asarray(hand.lower, float), np.asarray(hand.upper, float)
+    dof = len(lower)
+    q = (upper + lower) / 2 + np.asarray(z, dtype=np.float64)[:, :dof] * (upper - lower) / 2
+    basis = hand.coupling_basis
+    q = q @ np.linalg.pinv(basis).T @ basis.T
+    return np.clip(q, lower, upper)
 
 
 # ---- inputs ------------------------------------------------------------------------------------
@@ -316,14 +372,19 @@ class InteractionNet(nn.Module):
         self.time = nn.Sequential(nn.Linear(d, d), nn.GELU(), nn.Linear(d, d))
         self.glob = nn.Linear(3 * d, d)
         self.wrist_in = nn.Linear(9, d)
-        self.anchor_in = nn.Linear(3, d)
-        self.slot = nn.Parameter(torch.randn(5, d) * 0.02)
+        self.joints = c.target == "joints"
+        if self.joints:  # one token for the whole joint vector
+            self.joint_in = nn.Linear(c.joint_slots, d)
+            self.joint_out = nn.Linear(d, c.joint_slots)
+        else:  # one token per anchor
+            self.anchor_in = nn.Linear(3, d)
+            self.anchor_out = nn.Linear(d, 3)
+        self.slot = nn.Parameter(torch.randn(2 if self.joints else 5, d) * 0.02)
         self.blocks = nn.ModuleList([Block(d, c.heads, c.ff, c.film) for _ in range(c.layers)])
         self.out_norm = nn.LayerNorm(d)
         self.wrist_out = nn.Linear(d, 9)
-        self.anchor_out = nn.Linear(d, 3)
-        self.register_buffer("x_mean", torch.zeros(X_DIM))
-        self.register_buffer("x_std", torch.ones(X_DIM))
+        self.register_buffer("x_mean", torch.zeros(c.x_dim))
+        self.register_buffer("x_std", torch.ones(c.x_dim))
         betas = cosine_betas(c.diffusion_steps)
         self.register_buffer("alphas_bar", torch.cumprod(1.0 - betas, dim=0), persistent=False)
 
@@ -359,17 +420,20 @@ class InteractionNet(nn.Module):
         return [block.memory(cond.tokens) for block in self.blocks]
 
     def forward(self, x: torch.Tensor, t: torch.Tensor, cond: Condition) -> torch.Tensor:
-        """Predicted noise (B, 21) for normalised noisy x (B, 21) at integer steps t (B,)."""
+        """Predicted noise (B, x_dim) for normalised noisy x (B, x_dim) at integer steps t (B,)."""
         emb = self.time(timestep_embedding(t, self.config.width)) + cond.glob
-        tokens = torch.cat(
-            [self.wrist_in(x[:, None, :9]), self.anchor_in(x[:, 9:].reshape(-1, 4, 3))], dim=1
-        )
+        if self.joints:
+            rest = self.joint_in(x[:, None, 9:])
+        else:
+            rest = self.anchor_in(x[:, 9:].reshape(-1, 4, 3))
+        tokens = torch.cat([self.wrist_in(x[:, None, :9]), rest], dim=1)
         h = tokens + self.slot[None] + emb[:, None]
         memory = cond.memory or self.memory(cond)
         for block, mem in zip(self.blocks, memory, strict=True):
             h = block(h, mem, emb)
         h = self.out_norm(h)
-        return torch.cat([self.wrist_out(h[:, 0]), self.anchor_out(h[:, 1:]).flatten(1)], dim=1)
+        rest = self.joint_out(h[:, 1]) if self.joints else self.anchor_out(h[:, 1:]).flatten(1)
+        return torch.cat([self.wrist_out(h[:, 0]), rest], dim=1)
 
     # ---- diffusion ---------------------------------------------------------------------------
     def loss(self, x0: torch.Tensor, cond: Condition, generator: torch.Generator | None = None):
@@ -380,7 +444,7 @@ class InteractionNet(nn.Module):
         ab = self.alphas_bar[t][:, None]
         xt = ab.sqrt() * x0 + (1 - ab).sqrt() * eps
         err = (self(xt, t, cond) - eps) ** 2
-        w = torch.ones(X_DIM)
+        w = torch.ones(self.config.x_dim)
         w[9:] = self.config.anchor_weight
         return (err * w).sum(1).mean() / w.sum()
 
@@ -394,7 +458,7 @@ class InteractionNet(nn.Module):
         guidance: float,
         generator: torch.Generator | None = None,
     ) -> torch.Tensor:
-        """n normalised samples per condition row (deterministic DDIM, eta = 0): (B * n, 21)."""
+        """n normalised samples per condition row (deterministic DDIM, eta = 0): (B * n, x_dim)."""
         cond.memory = self.memory(cond)
         c = cond.repeat(n)
         guided = uncond is not None and guidance != 1.0
@@ -402,7 +466,7 @@ class InteractionNet(nn.Module):
             uncond.memory = self.memory(uncond)
             c = Condition.cat(c, uncond.repeat(n))
         rows = cond.tokens.shape[0] * n
-        x = torch.randn((rows, X_DIM), generator=generator)
+        x = torch.randn((rows, self.config.x_dim), generator=generator)
         T = self.config.diffusion_steps
         ts = torch.linspace(T - 1, 0, steps).round().long().tolist()
         for i, t in enumerate(ts):
@@ -444,7 +508,8 @@ class InteractionModel:
         config = config or InteractionConfig()
         return cls(InteractionNet(config), config)
 
-    def save(self, folder: str, name: str = NAME) -> None:
+    def save(self, folder: str, name: str | None = None) -> None:
+        name = name or self.config.name
         cfg = {
             "config": self.config.to_json(),
             "info": self.info,
@@ -454,11 +519,12 @@ class InteractionModel:
 
     @classmethod
     def load(cls, folder: str | None = None, name: str = NAME) -> InteractionModel:
-        state, cfg = load_weights(name, RETRAIN, folder)
+        retrain = DIRECT_RETRAIN if name == DIRECT_NAME else RETRAIN
+        state, cfg = load_weights(name, retrain, folder)
         where = f"{folder or 'learned/weights'}/{name}"
         if cfg.get("format") != "drograsp-interaction/1" or "config" not in cfg:
             raise WeightsError(
-                f"{where}.json is not an interaction model config; remake it with `{RETRAIN}`"
+                f"{where}.json is not an interaction model config; remake it with `{retrain}`"
             )
         try:
             config = InteractionConfig.from_json(cfg["config"])
@@ -467,7 +533,7 @@ class InteractionModel:
         except (TypeError, ValueError, RuntimeError, KeyError) as err:
             raise WeightsError(
                 f"{where}.safetensors does not fit the model's code ({type(err).__name__}: "
-                f"{str(err)[:300]}); remake it with `{RETRAIN}`"
+                f"{str(err)[:300]}); remake it with `{retrain}`"
             ) from None
         net.eval()
         return cls(net, config, cfg.get("info", {}))
@@ -521,18 +587,48 @@ class InteractionModel:
     ) -> tuple[np.ndarray, np.ndarray]:
         """n wrist poses (n, 7) [x, y, z, qw, qx, qy, qz] and anchors (n, 4, 3) in the cloud's
         frame; anchors snapped to the nearest cloud points unless snap=False."""
+        pts, prepared, x = self._draw(cloud, text, hand, n, guidance, steps, seed, "anchors")
+        wrists, anchors = decode_x(x, prepared.frame)
+        if snap:
+            anchors = snap_to_cloud(anchors, pts)
+        return wrists, anchors
+
+    def sample_configurations(
+        self,
+        cloud: object,
+        text: str,
+        hand: Any,
+        n: int = 8,
+        guidance: float | None = None,
+        steps: int | None = None,
+        seed: int | None = 0,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """A joints-target model's n wrist poses (n, 7) and joint values (n, dof) in the
+        cloud's frame, within the hand's limits and couplings."""
+        from models.hands import HandModel, load_hand
+
+        model = hand if isinstance(hand, HandModel) else load_hand(hand)
+        _, prepared, x = self._draw(cloud, text, model, n, guidance, steps, seed, "joints")
+        return decode_wrist(x, prepared.frame), decode_joints(x[:, 9:], model)
+
+    def _draw(self, cloud, text, hand, n, guidance, steps, seed, target: str):
         from learned.text import encode
 
+        if self.config.target != target:
+            raise SamplingError(
+                f"this model draws {self.config.target}, not {target}: use "
+                f"{'sample' if self.config.target == 'anchors' else 'sample_configurations'}"
+            )
         if isinstance(n, bool) or not isinstance(n, int | np.integer) or n < 1:
             raise SamplingError(f"n must be a positive integer, got {n!r}")
         pts = check_cloud(cloud)
         vec = encode([text])[0]
         prepared = prepare_cloud(pts, self.config)
-        x = self.sample_prepared(prepared, vec, hand, int(n), guidance, steps, seed)
-        wrists, anchors = decode_x(x, prepared.frame)
-        if snap:
-            anchors = snap_to_cloud(anchors, pts)
-        return wrists, anchors
+        return (
+            pts,
+            prepared,
+            self.sample_prepared(prepared, vec, hand, int(n), guidance, steps, seed),
+        )
 
 
 class SamplingError(DrograspError, ValueError):

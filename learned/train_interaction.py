@@ -28,11 +28,10 @@ from scipy.spatial.transform import Rotation
 
 from learned.dataset import DatasetError, GraspArrays, load_split
 from learned.interaction import (
-    NAME,
-    X_DIM,
     InteractionConfig,
     InteractionModel,
     canonical_frame,
+    encode_joints,
     encode_x,
     hand_points,
 )
@@ -221,6 +220,18 @@ class Batcher:
             cache.groups(cat, seed, config)
         self.wrist = a["wrist"][rows].astype(np.float64)
         self.anchors = a["anchors"][rows].astype(np.float64)
+        self.joints = None  # the joints target: each row's joints scaled by its hand's limits
+        if config.target == "joints":
+            from models.hands import load_hand
+
+            self.joints = np.zeros((len(rows), config.joint_slots))
+            q = a["q_grasp"][rows].astype(np.float64)
+            for k, name in enumerate(self.hand_names):
+                hand = load_hand(name)
+                mine = self.hand_index == k
+                self.joints[mine] = encode_joints(
+                    q[mine, : hand.dof], hand.lower, hand.upper, config.joint_slots
+                )
         hp = [hand_points(h, config) for h in self.hand_names]
         self.hand_xyz = torch.from_numpy(np.stack([p for p, _ in hp])).float()
         self.hand_groups = {
@@ -230,6 +241,13 @@ class Batcher:
 
     def __len__(self) -> int:
         return len(self.rows)
+
+    def x(self, i: int, wrist: np.ndarray, anchors: np.ndarray, frame) -> np.ndarray:
+        """Row i's numbers to learn (unnormalised): wrist and anchors, or wrist and joints."""
+        x = encode_x(wrist[None], anchors[None], frame)[0]
+        if self.joints is None:
+            return x
+        return np.concatenate([x[:9], self.joints[i]])
 
     def _text(self, instr: int, pyrng: random.Random) -> np.ndarray:
         """One wording's embedding: generic noun, canonical form or a training paraphrase."""
@@ -253,7 +271,7 @@ class Batcher:
                 pts, w, anc = augment(pts, w, anc, rng)
             frame = canonical_frame(pts)
             xyz.append(frame.to_canonical(pts) * 10.0)
-            xs.append(encode_x(w[None], anc[None], frame)[0])
+            xs.append(self.x(i, w, anc, frame))
             g = self.cache.groups(cat, seed, self.config)[k]
             for key in groups:
                 groups[key].append(getattr(g, key))
@@ -292,7 +310,7 @@ def batch_loss(
 
 
 def x_statistics(batcher: Batcher, rng: np.random.Generator, n: int = 4096) -> tuple:
-    """Mean and spread of the 21 numbers under augmentation; rotation dims share one scale so
+    """Mean and spread of the numbers learned, under augmentation; rotation dims share one scale so
     the 6-D rotation keeps its geometry, anchors share the translation's."""
     picks = rng.integers(0, len(batcher), size=min(n, 4 * len(batcher)))
     xs = []
@@ -301,14 +319,17 @@ def x_statistics(batcher: Batcher, rng: np.random.Generator, n: int = 4096) -> t
         pts, w, a = augment(
             item["points"][0].astype(np.float64), batcher.wrist[i], batcher.anchors[i], rng
         )
-        xs.append(encode_x(w[None], a[None], canonical_frame(pts))[0])
+        xs.append(batcher.x(i, w, a, canonical_frame(pts)))
     x = np.stack(xs)
     mean = x.mean(0)
     mean[3:9] = 0.0
-    std = np.empty(X_DIM)
+    std = np.empty(x.shape[1])
     std[:3] = x[:, :3].std(0).mean()
     std[3:9] = 0.5
-    std[9:] = x[:, 9:].std(0).mean()
+    if batcher.joints is None:  # anchors share one scale, as the translation
+        std[9:] = x[:, 9:].std(0).mean()
+    else:  # joints each their own (padding slots stay at 0 with a unit scale)
+        std[9:] = np.where(x[:, 9:].std(0) > 1e-3, x[:, 9:].std(0), 1.0)
     return torch.tensor(mean, dtype=torch.float32), torch.tensor(std, dtype=torch.float32)
 
 
@@ -479,6 +500,8 @@ def train(
     checkpoint()
 
     final = InteractionModel.new(config, settings.seed)
+    target = "" if config.target == "anchors" else f" --target {config.target}"
+    name = config.name
     final.net.load_state_dict(ema)
     names = " ".join(map(str, data)) if not isinstance(data, str | Path) else str(data)
     final.info = {
@@ -489,21 +512,21 @@ def train(
         "seed": settings.seed,
         "final_loss": float(np.mean([h["loss"] for h in history[-50:]])) if history else None,
         "val_loss": next((h["val"] for h in reversed(history) if "val" in h), None),
-        "command": f"drograsp train interaction --data {names} --out {out} --minutes "
+        "command": f"drograsp train interaction{target} --data {names} --out {out} --minutes "
         f"{settings.minutes:g} --seed {settings.seed}",
     }
     final.save(str(out))
     if install:
         WEIGHTS_DIR.mkdir(parents=True, exist_ok=True)
         for suffix in (".safetensors", ".json"):
-            shutil.copyfile(out / f"{NAME}{suffix}", WEIGHTS_DIR / f"{NAME}{suffix}")
+            shutil.copyfile(out / f"{name}{suffix}", WEIGHTS_DIR / f"{name}{suffix}")
     (out / "history.json").write_text(json.dumps(history[-2000:]), encoding="utf-8")
     return TrainResult(
         steps=step,
         minutes=final.info["minutes"],
         final_loss=final.info["final_loss"] or float("nan"),
         val_loss=final.info["val_loss"],
-        weights=out / f"{NAME}.safetensors",
+        weights=out / f"{name}.safetensors",
         curve=out / "loss.png",
         resumed_from=resumed,
         history=history,

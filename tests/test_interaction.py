@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import shutil
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +17,7 @@ from learned.interaction import (
     Condition,
     InteractionConfig,
     InteractionModel,
+    SamplingError,
     canonical_frame,
     decode_x,
     encode_x,
@@ -33,6 +35,7 @@ from learned.paraphrase import (
 from learned.text import encode
 from learned.weights import WeightsError
 from models.errors import InstructionError, ObjectError
+from models.hands import available_hands
 from models.objects import TABLE, instructions, make_object
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "grasps_v2"
@@ -265,3 +268,48 @@ def test_cli_generic_share_reaches_the_settings_and_is_checked(capsys) -> None:
     with pytest.raises(SystemExit) as exc:
         build_parser(bad).parse_args(bad)
     assert exc.value.code == 2 and "between 0 and 1" in capsys.readouterr().err
+
+
+# ---- the joints target (direct-diffusion ablation) ------------------------------------------
+@pytest.mark.parametrize("hand", available_hands())
+def test_joint_encoding_round_trips_within_limits_and_couplings(hand: str) -> None:
+    from learned.interaction import decode_joints, encode_joints
+    from models.hands import load_hand
+
+    model = load_hand(hand)
+    rng = np.random.default_rng(0)
+    basis = model.coupling_basis
+    q = np.clip(rng.uniform(-1, 1, (6, basis.shape[1])) @ basis.T, model.lower, model.upper)
+    z = encode_joints(q, model.lower, model.upper, 24)
+    assert z.shape == (6, 24) and np.abs(z).max() <= 1 + 1e-9 and not z[:, model.dof :].any()
+    back = decode_joints(z, model)
+    np.testing.assert_allclose(back, q, atol=1e-9)
+    wild = decode_joints(rng.uniform(-3, 3, (6, 24)), model)  # off limits and couplings
+    assert (wild >= model.lower - 1e-12).all() and (wild <= model.upper + 1e-12).all()
+    np.testing.assert_allclose(wild @ model.coupling_equalities.T, 0, atol=1e-9)
+
+
+@pytest.mark.skipif(not DATA.is_dir(), reason="data/grasps_v2 absent")
+def test_joints_target_trains_saves_as_direct_and_samples_configurations(tmp_path: Path) -> None:
+    from learned.train_interaction import TrainSettings, train
+    from models.hands import load_hand
+
+    data, out = tmp_path / "data", tmp_path / "run"
+    _mini_dataset(data)
+    settings = TrainSettings(
+        minutes=5, max_steps=2, batch=4, repeats=2, samples_per_object=1, progress=False
+    )
+    result = train(data, out, settings, replace(TINY, target="joints"))
+    assert result.weights.name == "direct.safetensors" and result.weights.is_file()
+    model = InteractionModel.load(str(out), "direct")
+    assert model.config.target == "joints" and "--target joints" in model.info["command"]
+    shadow = load_hand("shadow")
+    cloud = make_object("mug", 3).points
+    wrists, q = model.sample_configurations(cloud, "Use a mug by handle", shadow, 3)
+    assert wrists.shape == (3, 7) and q.shape == (3, shadow.dof)
+    assert (q >= shadow.lower - 1e-12).all() and (q <= shadow.upper + 1e-12).all()
+    np.testing.assert_allclose(q @ shadow.coupling_equalities.T, 0, atol=1e-9)
+    with pytest.raises(SamplingError, match="draws joints"):
+        model.sample(cloud, "Use a mug by handle", shadow, 2)
+    with pytest.raises(ValueError, match="unknown target"):
+        InteractionConfig(target="fingers")

@@ -46,6 +46,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     i.add_argument("--layers", type=positive_int, default=None, help="denoiser layers")
     i.add_argument(
+        "--target",
+        choices=("anchors", "joints"),
+        default="anchors",
+        help="what is drawn with the wrist: anchors (the pipeline's first stage, weights "
+        "'interaction') or joints (the direct-diffusion ablation, weights 'direct')",
+    )
+    i.add_argument(
         "--balance",
         type=float,
         default=0.5,
@@ -100,7 +107,7 @@ def interaction_setup(args: argparse.Namespace):
     from learned.interaction import InteractionConfig
     from learned.train_interaction import TrainSettings
 
-    config = InteractionConfig()
+    config = InteractionConfig(target=args.target)
     if args.width is not None:
         config.width = args.width
     if args.layers is not None:
