@@ -27,7 +27,14 @@ from models.reproducible import rounded
 from planner.grasp_program import GraspProgram, GraspTargets, SolveResult, grasp_program
 from planner.intent import check_configuration, intent_definition
 from planner.labels import grasp_part
-from planner.learned_proposer import anchor_closure, dro_targets, fitted, learned_proposals
+from planner.learned_proposer import (
+    anchor_closure,
+    as_drawn,
+    direct_proposals,
+    dro_targets,
+    fitted,
+    learned_proposals,
+)
 from planner.model_proposer import HandGeometry, ModelProposer
 from planner.quality import contact_quality
 from planner.results import CandidateResult, PlanResult, Proposal
@@ -75,8 +82,9 @@ class FunctionalPlanner:
         stages (planner.learned_proposer), as `settings.proposer` says; solving, the schedule
         and validation are the same for both."""
         text = instruction if isinstance(instruction, str) else instruction.text
-        if self.proposer_for(obj, instruction) == "learned":
-            return self._plan_learned(obj, text)
+        chosen = self.proposer_for(obj, instruction)
+        if chosen in ("learned", "direct"):
+            return self._plan_learned(obj, text, direct=chosen == "direct")
         if isinstance(instruction, str):
             instruction = parse_instruction(instruction)
         part = instruction.part
@@ -121,11 +129,12 @@ class FunctionalPlanner:
                 return "learned"
         return "model"
 
-    def _plan_learned(self, obj: ObjectModel, text: str) -> PlanResult:
+    def _plan_learned(self, obj: ObjectModel, text: str, direct: bool = False) -> PlanResult:
         """Plan on the learned stages' proposals. The sentence is read as the nearest table
         instruction (learned.understand); its part is what the grasp must touch, and its
         intent is checked, only where the object has part labels that name that part: on an
-        unlabelled cloud a grasp that holds is success."""
+        unlabelled cloud a grasp that holds is success. `direct`: the direct-diffusion
+        ablation's samples, validated as drawn."""
         from learned.understand import understand
 
         s = self.settings
@@ -136,14 +145,13 @@ class FunctionalPlanner:
         part = instruction.part if known else None
         program = grasp_program(self.hand, obj.collision_pieces(), s.program)
         build = time.perf_counter() - start
-        drawn = learned_proposals(
-            obj, text, self.hand, s.learned_samples, s.learned_seed, s.learned_guidance
-        )
+        draw = direct_proposals if direct else learned_proposals
+        drawn = draw(obj, text, self.hand, s.learned_samples, s.learned_seed, s.learned_guidance)
         proposals = []
         for i in range(len(drawn.wrists)):
             wrist, anchors = rounded(drawn.wrists[i]), rounded(drawn.anchors[i])
             pending = None
-            if s.learned_dro:
+            if s.learned_dro and not direct:
                 key = (s.learned_seed, i)
                 pending = partial(
                     dro_targets,
@@ -155,15 +163,19 @@ class FunctionalPlanner:
                     key,
                     weights=s.learned_dro_weights,
                 )
+            if drawn.q is None:  # the program starts from the open pose
+                q = self.hand.open_pose.astype(np.float64).copy()
+            else:
+                q = rounded(drawn.q[i])
             proposals.append(
                 Proposal(
                     wrist,
-                    self.hand.open_pose.astype(np.float64).copy(),
+                    q,
                     anchors,
                     rounded(drawn.normals[i]),
                     0.0,
                     anchor_quality=anchor_closure(drawn.anchors[i], drawn.normals[i], obj),
-                    kind="learned",
+                    kind="direct" if direct else "learned",
                     pending_targets=pending,
                 )
             )
@@ -179,7 +191,7 @@ class FunctionalPlanner:
             times,
         )
         result.understood = understood.to_dict()
-        result.proposer = "learned"
+        result.proposer = "direct" if direct else "learned"
         return result
 
     def _run(
@@ -259,7 +271,9 @@ class FunctionalPlanner:
             proposal.point_index, proposal.point_targets = made.index, rounded(made.targets)
             proposal.point_weights, proposal.pending_targets = made.weights, None
             times["dro"] = time.perf_counter() - t0
-        if proposal.kind == "learned" and self.settings.learned_solver == "fit":
+        if proposal.kind == "direct":
+            solved = as_drawn(program, proposal)
+        elif proposal.kind == "learned" and self.settings.learned_solver == "fit":
             solved = fitted(program, proposal)
         else:
             solved = program.solve(

@@ -8,7 +8,9 @@ proposals (planner.functional): anchors with their surface normals, the open pos
 starting configuration, and the point targets the program pulls toward (`point_weights`:
 closeness, so far points weigh little). The samples are solved best anchor closure first, as
 the model-based ones. `fitted` is the ablation without Drake (`PlannerSettings.learned_solver`
-"fit"): the joints fitted to the targets with no collision constraints.
+"fit"): the joints fitted to the targets with no collision constraints. `direct_proposals` and
+`as_drawn` are the ablation of direct diffusion (`PlannerSettings.proposer` "direct"): wrist and
+joints drawn by one model and validated as drawn.
 """
 
 from __future__ import annotations
@@ -49,6 +51,7 @@ class LearnedProposals:
     anchors: np.ndarray  # (n, 4, 3)
     normals: np.ndarray  # (n, 4, 3)
     times: dict[str, float]
+    q: np.ndarray | None = None  # (n, dof): direct diffusion's joints (None: the open pose)
 
 
 def learned_proposals(
@@ -71,6 +74,54 @@ def learned_proposals(
     nearest = cKDTree(obj.points).query(anchors.reshape(-1, 3))[1]
     normals = obj.normals[nearest].reshape(anchors.shape)
     return LearnedProposals(wrists, anchors, normals, times)
+
+
+def direct_proposals(
+    obj: ObjectModel,
+    text: str,
+    hand: HandModel,
+    samples: int,
+    seed: int = 0,
+    guidance: float | None = None,
+) -> LearnedProposals:
+    """`samples` [wrist, joints] drawn by the direct-diffusion model for the cloud, sentence and
+    hand. Its anchors are the object points nearest the anchor fingertips, so the samples are
+    ordered and recorded as the pipeline's are."""
+    import torch
+
+    from learned.interaction import DIRECT_NAME, load_model
+
+    t0 = time.perf_counter()
+    model = load_model(name=DIRECT_NAME)
+    wrists, q = model.sample_configurations(obj.points, text, hand, samples, guidance, seed=seed)
+    times = {"direct": time.perf_counter() - t0}
+    tips = hand.fingertip_positions(
+        torch.tensor(wrists), torch.tensor(q), list(hand.meta.anchor_fingers)
+    ).numpy()
+    nearest = cKDTree(obj.points).query(tips.reshape(-1, 3))[1]
+    anchors = obj.points[nearest].reshape(tips.shape)
+    normals = obj.normals[nearest].reshape(tips.shape)
+    return LearnedProposals(wrists, anchors, normals, times, q=q)
+
+
+def as_drawn(program: GraspProgram, proposal: Proposal) -> SolveResult:
+    """A direct-diffusion sample as its configuration: nothing solved, distance and anchor
+    error measured; every sample goes on to MuJoCo, as in the paper's Scene-Diffuser baseline."""
+    hand = program.hand
+    wrist = rounded(proposal.wrist)
+    q = rounded_within(proposal.q, hand.lower, hand.upper)
+    distance = program.hand_object_distance(wrist, q)
+    return SolveResult(
+        wrist=wrist,
+        q=q,
+        ok=True,
+        min_distance=distance,
+        anchor_error=program.anchor_error(wrist, q, proposal.anchors),
+        solver_success=True,
+        solver_status="as drawn",
+        solve_time=0.0,
+        message=f"direct diffusion sample, not solved (distance {distance * 1000:.1f} mm)",
+    )
 
 
 def dro_targets(

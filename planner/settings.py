@@ -106,8 +106,11 @@ class PlannerSettings:
     # Where proposals come from: "model" (the geometric proposer of this module: needs part
     # labels and a "[Intent] a [Object] by [Part]" instruction), "learned" (interaction
     # diffusion -> D(R,O), planner.learned_proposer: any cloud, any sentence) or "auto": model
-    # where the object has part labels and the instruction parses, learned otherwise. The model-based proposer stays the default for labelled input until the learned
-    # one beats it in `python -m eval.benchmark` (README, "Learned stages").
+    # where the object has part labels and the instruction parses, learned otherwise. The
+    # model-based proposer stays the default for labelled input until the learned one beats it
+    # in `python -m eval.benchmark` (README, "Learned stages"). "direct" is the ablation of
+    # direct diffusion: wrist and joints drawn by one model (weights "direct"), no anchors, no
+    # D(R,O) and no solver, validated as drawn (the paper's Scene-Diffuser comparison).
     proposer: str = "auto"
     # interaction samples (proposals) the learned proposer draws. On the 150 test pairs
     # (`python -m eval.benchmark`, interim weights) 16 vs 8 samples: held on the instructed part
@@ -168,6 +171,6 @@ class PlannerSettings:
 
 
 RANKINGS = ("task", "epsilon")
-PROPOSERS = ("auto", "model", "learned")
+PROPOSERS = ("auto", "model", "learned", "direct")
 LEARNED_SOLVERS = ("drake", "fit")
 PROPOSAL_ORDERS = ("anchors", "clearance")

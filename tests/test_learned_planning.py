@@ -60,6 +60,40 @@ def test_an_unlabelled_cloud_and_a_sentence_are_planned(hand_name):
     assert "interaction" in result.stage_times() and "dro" in result.stage_times()
 
 
+@pytest.mark.parametrize("hand_name", ["allegro", "leap", "shadow"])
+def test_the_direct_ablation_validates_its_samples_as_drawn(hand_name, monkeypatch):
+    """proposer="direct": wrist and joints from one diffusion model (here an untrained small
+    one, standing in for learned/weights/direct), nothing solved, each sample validated."""
+    import learned.interaction as interaction
+
+    config = interaction.InteractionConfig(
+        points=512,
+        object_levels=((64, 8, (16, 32)), (16, 8, (32, 32))),
+        hand_levels=((32, 8, (16, 32)), (8, 8, (32, 32))),
+        width=32,
+        heads=2,
+        layers=1,
+        ff=64,
+        diffusion_steps=20,
+        sample_steps=3,
+        target="joints",
+    )
+    stand_in = interaction.InteractionModel.new(config, seed=0)
+    monkeypatch.setitem(interaction._loaded, f"None:{interaction.DIRECT_NAME}", stand_in)
+    cloud = make_object("mug", 3).sample_cloud(2048).points
+    settings = PlannerSettings(proposer="direct", learned_samples=3, max_candidates=2)
+    result = plan_grasp(cloud, "Use a mug by handle", hand_name, settings)
+    assert result.proposer == "direct" and len(result.candidates) == 3
+    hand = FunctionalPlanner(hand_name).hand
+    for c in result.candidates:
+        assert c.proposal.kind == "direct" and c.solve.solver_status == "as drawn"
+        assert c.proposal.point_targets is None  # no D(R,O)
+        np.testing.assert_array_equal(c.solve.q, c.proposal.q)  # nothing solved
+        assert (c.solve.q >= hand.lower).all() and (c.solve.q <= hand.upper).all()
+    assert sum(c.order is not None for c in result.candidates) >= 1
+    assert "direct" in result.stage_times() and "dro" not in result.stage_times()
+
+
 @pytest.mark.slow
 def test_learned_proposals_hold_a_mug_by_its_body():
     """The shipped weights' grasps hold: on the labelled mug the part is voted too."""

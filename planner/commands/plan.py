@@ -91,16 +91,17 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--proposer",
         default="auto",
-        choices=("auto", "model", "learned"),  # planner.functional.PROPOSERS
+        choices=("auto", "model", "learned", "direct"),  # planner.settings.PROPOSERS
         help="where proposals come from: model (needs part labels), learned (interaction "
         "diffusion -> D(R,O); any cloud, any sentence), auto (model where the object has part "
-        "labels and the instruction parses; default)",
+        "labels and the instruction parses; default), direct (the ablation: wrist and joints "
+        "drawn by one diffusion model, validated as drawn)",
     )
     p.add_argument(
         "--samples",
         type=positive_int,
         default=16,
-        help="interaction samples the learned proposer draws (default 16)",
+        help="samples the learned (or direct) proposer draws (default 16)",
     )
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.set_defaults(func=run)
@@ -174,7 +175,8 @@ def run(args: argparse.Namespace) -> int:
     )
     obj = object_from_args(args)
     planner = FunctionalPlanner(args.hand, settings)
-    learned = planner.proposer_for(obj, args.text) == "learned"
+    chosen = planner.proposer_for(obj, args.text)
+    learned = chosen in ("learned", "direct")
     if not learned and not obj.labelled:
         raise DrograspError(
             "the object has no part labels, so the planner cannot find the instructed part; "
@@ -183,7 +185,7 @@ def run(args: argparse.Namespace) -> int:
         )
     if not learned:
         parse_instruction(args.text)
-    source = f"{args.samples} learned proposals" if learned else "model-based proposals"
+    source = f"{args.samples} {chosen} proposals" if learned else "model-based proposals"
     print(
         f"planning {args.text!r} with {args.hand} from {source}: up to {args.candidates} "
         "candidates solved (Drake) and validated (MuJoCo)...",
