@@ -20,6 +20,8 @@ method:
 - within N: the returned grasp holds and touches the instructed part, N validations at most;
 - held: the returned grasp holds, on any part; part accuracy: held on the instructed part
   among the held;
+- meets intent: among the grasps held on the instructed part, the share that meet the
+  instruction's intent definition (planner.intent, checked on the labelled object);
 - time: median wall time per pair, and per stage.
 
 `--paraphrase` gives the learned methods an evaluation-only rewording of each instruction
@@ -50,6 +52,7 @@ from models.hands import available_hands, load_hand
 from models.objects import ObjectModel, make_object
 from models.objects.views import random_turn, single_view_object, turned
 from planner.functional import FunctionalPlanner, PlannerSettings
+from planner.intent import check_configuration
 from planner.labels import grasp_part
 from planner.validation import validate
 
@@ -82,6 +85,9 @@ class Record:
     returned_ok: bool = False
     held: bool = False
     part_touched: str | None = None
+    # the returned grasp, held on the instructed part, against its intent's definition
+    # (planner.intent), checked on the labelled object; None: not held on the part
+    intent_ok: bool | None = None
     understood: str | None = None
     candidates: int = 0
     plan_time: float = 0.0
@@ -168,6 +174,10 @@ def run_task(task: tuple) -> Record:
     if rec.held:
         rec.part_touched = touched_part(result.grasp, obj, hand)
         rec.returned_ok = rec.part_touched == part
+    if rec.returned_ok:
+        wrist = np.concatenate([result.grasp.wrist_pos, result.grasp.wrist_quat])
+        check = check_configuration(wrist, np.asarray(result.grasp.grasp), obj, hand, instruction)
+        rec.intent_ok = bool(check.ok)
     rec.understood = result.instruction.text
     rec.candidates = len(result.candidates)
     rec.stage_times = {k: round(v, 4) for k, v in result.stage_times().items()}
@@ -209,6 +219,7 @@ def summarise(records: list[Record]) -> list[dict]:
         for hand in sorted({r.hand for r in records if r.method == method}):
             rs = [r for r in records if r.method == method and r.hand == hand]
             held = [r for r in rs if r.held]
+            on_part = [r for r in rs if r.returned_ok and r.intent_ok is not None]
             times = [r.plan_time for r in rs if not r.error]
             stages: dict[str, list[float]] = {}
             for r in rs:
@@ -225,6 +236,9 @@ def summarise(records: list[Record]) -> list[dict]:
                     "part_accuracy": (
                         100 * float(np.mean([r.returned_ok for r in held])) if held else 0.0
                     ),
+                    "intent": (
+                        100 * float(np.mean([r.intent_ok for r in on_part])) if on_part else 0.0
+                    ),
                     "median_s": statistics.median(times) if times else float("nan"),
                     "stage_median_s": {k: statistics.median(v) for k, v in stages.items()},
                     "errors": sum(bool(r.error) for r in rs),
@@ -236,11 +250,12 @@ def summarise(records: list[Record]) -> list[dict]:
 def table(rows: list[dict], max_candidates: int) -> str:
     head = (
         f"| method | hand | pairs | first | within {max_candidates} | held | part accuracy "
-        "| median s / pair |\n|---|---|---|---|---|---|---|---|\n"
+        "| meets intent | median s / pair |\n|---|---|---|---|---|---|---|---|---|\n"
     )
     body = "".join(
         f"| {r['method']} | {r['hand']} | {r['pairs']} | {r['first']:.0f}% | {r['within']:.0f}% "
-        f"| {r['held']:.0f}% | {r['part_accuracy']:.0f}% | {r['median_s']:.1f} |\n"
+        f"| {r['held']:.0f}% | {r['part_accuracy']:.0f}% | {r.get('intent', 0.0):.0f}% "
+        f"| {r['median_s']:.1f} |\n"
         for r in rows
     )
     return head + body

@@ -38,7 +38,24 @@ def test_a_run_writes_its_records_and_resumes(tmp_path, capsys):
     assert {r["method"] for r in summary["rows"]} == {"no_dro", "model"}
     assert (tmp_path / "bars.png").stat().st_size > 0
     assert "| model | allegro | 5 |" in (tmp_path / "table.md").read_text()
+    records = [json.loads(line) for line in lines]
+    for r in records:  # intent judged exactly where the grasp held on the instructed part
+        assert (r["intent_ok"] is not None) == r["returned_ok"]
     capsys.readouterr()
     assert benchmark.main(argv) == 0  # nothing left to do: the records are reused
     assert "10 tasks, 10 done before" in capsys.readouterr().out
     assert len((tmp_path / "records.jsonl").read_text().splitlines()) == 10
+
+
+def test_the_intent_share_counts_grasps_held_on_the_part_only():
+    def rec(returned_ok, intent_ok):
+        r = benchmark.Record("learned", "allegro", "mug", 0, "Use a mug by handle", "t", "handle")
+        r.held = r.returned_ok = returned_ok
+        r.intent_ok = intent_ok
+        return r
+
+    rows = benchmark.summarise(
+        [rec(True, True), rec(True, False), rec(True, True), rec(False, None)]
+    )
+    assert rows[0]["intent"] == pytest.approx(200 / 3) and rows[0]["within"] == 75.0
+    assert "| 67% |" in benchmark.table(rows, 8)
