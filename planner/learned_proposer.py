@@ -107,21 +107,8 @@ def direct_proposals(
 def as_drawn(program: GraspProgram, proposal: Proposal) -> SolveResult:
     """A direct-diffusion sample as its configuration: nothing solved, distance and anchor
     error measured; every sample goes on to MuJoCo, as in the paper's Scene-Diffuser baseline."""
-    hand = program.hand
-    wrist = rounded(proposal.wrist)
-    q = rounded_within(proposal.q, hand.lower, hand.upper)
-    distance = program.hand_object_distance(wrist, q)
-    return SolveResult(
-        wrist=wrist,
-        q=q,
-        ok=True,
-        min_distance=distance,
-        anchor_error=program.anchor_error(wrist, q, proposal.anchors),
-        solver_success=True,
-        solver_status="as drawn",
-        solve_time=0.0,
-        message=f"direct diffusion sample, not solved (distance {distance * 1000:.1f} mm)",
-    )
+    note = "direct diffusion sample, not solved"
+    return unsolved(program, proposal.wrist, proposal.q, proposal.anchors, "as drawn", 0.0, note)
 
 
 def dro_targets(
@@ -177,27 +164,43 @@ def fitted(program: GraspProgram, proposal: Proposal) -> SolveResult:
     MuJoCo, as in D(R,O) Grasp."""
     from learned.joint_fit import fit_configuration
 
-    hand = program.hand
     fit = fit_configuration(
-        hand,
+        program.hand,
         proposal.wrist,
         proposal.q,
         proposal.point_index,
         proposal.point_targets,
         proposal.point_weights,
     )
-    wrist = rounded(fit.wrist)  # its quaternion is normalised by the fit
-    q = rounded_within(fit.q, hand.lower, hand.upper)
+    note = (
+        f"points {fit.rms_error * 1000:.1f} mm rms from D(R,O)'s targets; no collision constraints"
+    )
+    return unsolved(program, fit.wrist, fit.q, proposal.anchors, "joint fit", fit.fit_time, note)
+
+
+def unsolved(
+    program: GraspProgram,
+    wrist: np.ndarray,
+    q: np.ndarray,
+    anchors: np.ndarray,
+    status: str,
+    seconds: float,
+    note: str,
+) -> SolveResult:
+    """A configuration the grasp program did not solve, as a SolveResult that goes on to
+    validation: within the joint limits, its distance to the object and anchor error measured."""
+    hand = program.hand
+    wrist = rounded(wrist)
+    q = rounded_within(q, hand.lower, hand.upper)
     distance = program.hand_object_distance(wrist, q)
     return SolveResult(
         wrist=wrist,
         q=q,
         ok=True,
         min_distance=distance,
-        anchor_error=program.anchor_error(wrist, q, proposal.anchors),
+        anchor_error=program.anchor_error(wrist, q, anchors),
         solver_success=True,
-        solver_status="joint fit",
-        solve_time=fit.fit_time,
-        message=f"points {fit.rms_error * 1000:.1f} mm rms from D(R,O)'s targets; "
-        f"no collision constraints (distance {distance * 1000:.1f} mm)",
+        solver_status=status,
+        solve_time=seconds,
+        message=f"{note} (distance {distance * 1000:.1f} mm)",
     )

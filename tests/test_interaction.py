@@ -37,19 +37,10 @@ from learned.weights import WeightsError
 from models.errors import InstructionError, ObjectError
 from models.hands import available_hands
 from models.objects import TABLE, instructions, make_object
+from tests.tiny_models import TINY_INTERACTION
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "grasps_v2"
-TINY = InteractionConfig(
-    points=512,
-    object_levels=((64, 8, (16, 32)), (16, 8, (32, 32))),
-    hand_levels=((32, 8, (16, 32)), (8, 8, (32, 32))),
-    width=32,
-    heads=2,
-    layers=1,
-    ff=64,
-    diffusion_steps=50,
-    sample_steps=5,
-)
+TINY = TINY_INTERACTION
 
 
 @pytest.fixture(scope="module")

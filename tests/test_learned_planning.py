@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -14,6 +15,7 @@ from models.errors import InstructionError, PlanningError
 from models.objects import load_object, make_object
 from planner import plan_grasp
 from planner.functional import FunctionalPlanner, PlannerSettings
+from tests.tiny_models import TINY_INTERACTION
 
 
 def test_a_parsed_instruction_is_kept_and_a_free_sentence_is_read_by_meaning():
@@ -66,18 +68,7 @@ def test_the_direct_ablation_validates_its_samples_as_drawn(hand_name, monkeypat
     one, standing in for learned/weights/direct), nothing solved, each sample validated."""
     import learned.interaction as interaction
 
-    config = interaction.InteractionConfig(
-        points=512,
-        object_levels=((64, 8, (16, 32)), (16, 8, (32, 32))),
-        hand_levels=((32, 8, (16, 32)), (8, 8, (32, 32))),
-        width=32,
-        heads=2,
-        layers=1,
-        ff=64,
-        diffusion_steps=20,
-        sample_steps=3,
-        target="joints",
-    )
+    config = replace(TINY_INTERACTION, diffusion_steps=20, sample_steps=3, target="joints")
     stand_in = interaction.InteractionModel.new(config, seed=0)
     monkeypatch.setitem(interaction._loaded, f"None:{interaction.DIRECT_NAME}", stand_in)
     cloud = make_object("mug", 3).sample_cloud(2048).points
