@@ -304,3 +304,13 @@ def test_joints_target_trains_saves_as_direct_and_samples_configurations(tmp_pat
         model.sample(cloud, "Use a mug by handle", shadow, 2)
     with pytest.raises(ValueError, match="unknown target"):
         InteractionConfig(target="fingers")
+
+
+def test_rows_known_to_miss_their_intent_are_left_out_unless_all_rows() -> None:
+    from learned.dataset import GraspArrays
+    from learned.train_interaction import usable_rows
+
+    ok = np.array([1, 0, -1, 0, 1])
+    data = GraspArrays("train", {"intent_ok": ok, "hand": np.zeros(5, dtype=int)}, {})
+    assert usable_rows(data).tolist() == [0, 2, 4]
+    assert usable_rows(data, all_rows=True).tolist() == [0, 1, 2, 3, 4]

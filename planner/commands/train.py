@@ -67,6 +67,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         "handle' (default 0.2; 0 turns it off)",
     )
     i.add_argument(
+        "--all-rows",
+        action="store_true",
+        help="learn also from grasps that miss their intent's definition (intent_ok 0)",
+    )
+    i.add_argument(
         "--install",
         action="store_true",
         help="copy the final weights to learned/weights/ (the shipped model)",
@@ -121,6 +126,7 @@ def interaction_setup(args: argparse.Namespace):
         checkpoint_minutes=args.checkpoint_minutes,
         balance=args.balance,
         generic_share=args.generic_share,
+        all_rows=args.all_rows,
     )
     return config, settings
 
