@@ -71,9 +71,14 @@ def learned_proposals(
     model = load_model()
     wrists, anchors = model.sample(obj.points, text, hand, samples, guidance, seed=seed)
     times = {"interaction": time.perf_counter() - t0}
-    nearest = cKDTree(obj.points).query(anchors.reshape(-1, 3))[1]
-    normals = obj.normals[nearest].reshape(anchors.shape)
+    _, normals = surface_at(obj, anchors)
     return LearnedProposals(wrists, anchors, normals, times)
+
+
+def surface_at(obj: ObjectModel, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The object's cloud points nearest `points` (..., 3) and their normals, same shape."""
+    nearest = cKDTree(obj.points).query(points.reshape(-1, 3))[1]
+    return obj.points[nearest].reshape(points.shape), obj.normals[nearest].reshape(points.shape)
 
 
 def direct_proposals(
@@ -98,9 +103,7 @@ def direct_proposals(
     tips = hand.fingertip_positions(
         torch.tensor(wrists), torch.tensor(q), list(hand.meta.anchor_fingers)
     ).numpy()
-    nearest = cKDTree(obj.points).query(tips.reshape(-1, 3))[1]
-    anchors = obj.points[nearest].reshape(tips.shape)
-    normals = obj.normals[nearest].reshape(tips.shape)
+    anchors, normals = surface_at(obj, tips)
     return LearnedProposals(wrists, anchors, normals, times, q=q)
 
 
