@@ -254,7 +254,7 @@ def table(rows: list[dict], max_candidates: int) -> str:
     )
     body = "".join(
         f"| {r['method']} | {r['hand']} | {r['pairs']} | {r['first']:.0f}% | {r['within']:.0f}% "
-        f"| {r['held']:.0f}% | {r['part_accuracy']:.0f}% | {r.get('intent', 0.0):.0f}% "
+        f"| {r['held']:.0f}% | {r['part_accuracy']:.0f}% | {r['intent']:.0f}% "
         f"| {r['median_s']:.1f} |\n"
         for r in rows
     )
