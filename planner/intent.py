@@ -460,10 +460,18 @@ def _mm(d: float) -> str:
 # ---- entry points ----------------------------------------------------------------------------
 def intent_definition(obj: ObjectModel, instruction: Instruction | str) -> Definition:
     """The definition an instruction asks of this object (its category's, where the object
-    or the instruction names a library category; else the intent's generic criteria)."""
+    or the instruction names a library category; else the intent's generic criteria). On an
+    object without part labels only intents measured on the shape alone (Liftup) have one."""
     ins = parse_instruction(instruction) if isinstance(instruction, str) else instruction
+    from models.objects.intents import CRITERIA, label_free
+
     if not obj.labelled:
-        raise InstructionError("intent checks need a part-labelled object")
+        if label_free(ins.intent):  # Liftup: the shape alone decides
+            return Definition(ins.category or obj.name, ins.intent, ins.part, CRITERIA[ins.intent])
+        raise InstructionError(
+            f"{ins.intent} checks need a part-labelled object (only "
+            f"{', '.join(i for i in CRITERIA if label_free(i))} can be checked without labels)"
+        )
     if ins.part not in obj.part_names:
         raise InstructionError(
             f"part {ins.part!r} is not a part of this object; its parts are {', '.join(obj.part_names)}"
@@ -474,8 +482,6 @@ def intent_definition(obj: ObjectModel, instruction: Instruction | str) -> Defin
     if cat in CATEGORIES and tuple(CATEGORIES[cat].parts) == tuple(obj.part_names):
         return definition(cat, ins.intent, ins.part)
     # not a library object: no functional elements or working parts are known
-    from models.objects.intents import CRITERIA
-
     others = tuple(p for p in obj.part_names if p != ins.part)
     crit = () if ins.intent == "Use" else CRITERIA[ins.intent]
     return Definition(cat or obj.name, ins.intent, ins.part, crit, receiver=others)

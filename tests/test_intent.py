@@ -372,3 +372,20 @@ def test_unknown_objects_get_the_generic_rules(objects):
     d = intent_definition(mug, "Handover a cup by body")  # parts differ from a cup's
     assert d.receiver == ("handle",) and d.criteria == CRITERIA["Handover"]
     assert intent_definition(mug, "Use a cup by handle").criteria == ()
+
+
+def test_liftup_is_checked_without_part_labels_the_others_are_refused(objects):
+    from dataclasses import replace
+
+    hand, mug = load_hand("allegro"), objects("mug")
+    bare = replace(mug, face_labels=None, cloud_labels=None, part_names=(), _derived={})
+    assert not bare.labelled
+    body = part_points(mug, "body")
+    top = [body[:, 0].mean(), body[:, 1].mean(), body[:, 2].max() + 0.01]
+    pose = placed(hand, top, -Z, X)
+    labelled = check_configuration(*pose, mug, hand, "Liftup a mug by body")
+    unlabelled = check_configuration(*pose, bare, hand, "Liftup a mug by body")
+    assert unlabelled.ok == labelled.ok and unlabelled["palm_down"].passed
+    assert [c.value for c in unlabelled.criteria] == [c.value for c in labelled.criteria]
+    with pytest.raises(InstructionError, match="part-labelled"):
+        check_configuration(*pose, bare, hand, "Hold a mug by body")

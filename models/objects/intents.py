@@ -110,6 +110,17 @@ CRITERIA: dict[str, tuple[str, ...]] = {
     "Handover": ("other_parts_clear", "away_from_free_end"),
     "Liftup": ("wrist_above_com", "palm_down", "above_table"),
 }
+# Criteria measured on the object's shape alone (centre of mass, lowest point, contacts), so
+# they can be checked on a cloud without part labels; an intent all of whose criteria are here
+# is checked on unlabelled objects too (the learned proposer prefers its samples that meet it).
+LABEL_FREE_CRITERIA: frozenset[str] = frozenset(
+    {"wrist_above_com", "palm_down", "above_table", "force_closure"}
+)
+
+
+def label_free(intent: str) -> bool:
+    """Whether every criterion of the intent can be measured without part labels."""
+    return set(CRITERIA[intent]) <= LABEL_FREE_CRITERIA
 
 
 # ---- per category: functional elements, working parts, the receiver's parts ----------------
