@@ -509,6 +509,19 @@ def check_configuration(
     return _evaluate(d, of, hf, cfg, rules)
 
 
+def faces_intent(
+    wrist: np.ndarray, obj: ObjectModel, hand: HandModel, instruction: Instruction | str
+) -> bool:
+    """Whether a wrist pose meets every criterion of the instruction's definition that the
+    wrist alone decides (models.objects.intents.WRIST_CRITERIA: Liftup's wrist above the
+    centre of mass and palm down); True where the definition has none. For ordering drawn
+    samples before they are solved."""
+    from models.objects.intents import WRIST_CRITERIA
+
+    check = check_configuration(wrist, hand.open_pose, obj, hand, instruction)
+    return all(c.passed for c in check.criteria if c.name in WRIST_CRITERIA)
+
+
 def _evaluate(
     d: Definition, of: _ObjectFacts, hf: _HandFacts, cfg: _Config, rules: Rules
 ) -> IntentCheck:
@@ -564,6 +577,7 @@ __all__ = [
     "check_configuration",
     "check_intent",
     "contacts",
+    "faces_intent",
     "intent_definition",
     "mass_centre",
     "region_points",

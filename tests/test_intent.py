@@ -389,3 +389,18 @@ def test_liftup_is_checked_without_part_labels_the_others_are_refused(objects):
     assert [c.value for c in unlabelled.criteria] == [c.value for c in labelled.criteria]
     with pytest.raises(InstructionError, match="part-labelled"):
         check_configuration(*pose, bare, hand, "Hold a mug by body")
+
+
+def test_faces_intent_reads_the_wrist_criteria_only(objects):
+    from planner.intent import faces_intent
+
+    hand, mug = load_hand("leap"), objects("mug")
+    body = part_points(mug, "body")
+    top = [body[:, 0].mean(), body[:, 1].mean(), body[:, 2].max() + 0.01]
+    wrist, _ = placed(hand, top, -Z, X)
+    assert faces_intent(wrist, mug, hand, "Liftup a mug by body")
+    side = [body[:, 0].min() - 0.01, body[:, 1].mean(), 0.0]
+    wrist_side, _ = placed(hand, side, X, Z)
+    assert not faces_intent(wrist_side, mug, hand, "Liftup a mug by body")
+    # no criterion of Hold is decided by the wrist alone
+    assert faces_intent(wrist_side, mug, hand, "Hold a mug by body")

@@ -118,6 +118,11 @@ LABEL_FREE_CRITERIA: frozenset[str] = frozenset(
 )
 
 
+# Criteria the wrist pose alone decides: a learned sample is known to face its intent (or not)
+# before it is solved, since the grasp program keeps the drawn wrist rotation.
+WRIST_CRITERIA: frozenset[str] = frozenset({"wrist_above_com", "palm_down"})
+
+
 def label_free(intent: str) -> bool:
     """Whether every criterion of the intent can be measured without part labels."""
     return set(CRITERIA[intent]) <= LABEL_FREE_CRITERIA
