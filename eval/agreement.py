@@ -29,7 +29,8 @@ from models.grasp import Grasp, from_dexgraspbench, to_dexgraspbench
 from models.hands import available_hands
 from models.hands.mjcf_frame import mjcf_root_offset
 from models.objects import make_object
-from planner.functional import FunctionalPlanner, PlannerSettings
+from planner.functional import FunctionalPlanner
+from planner.settings import PlannerSettings, ScheduleSettings
 from planner.validation import validate
 from planner.validation.hands import mjcf_hand, mjcf_joint_names
 
@@ -83,7 +84,8 @@ def judge_pair(job: tuple[str, str, int, str, str, int]) -> PairVerdicts:
     record = PairVerdicts(hand, category, seed, text)
     xml = Path(hand_files) / f"{hand}_right_hand.xml"
     try:
-        planner = FunctionalPlanner(hand, PlannerSettings(max_candidates=max_candidates))
+        settings = PlannerSettings(schedule=ScheduleSettings(max_candidates=max_candidates))
+        planner = FunctionalPlanner(hand, settings)
         obj = make_object(category, seed)
         result = planner.plan(obj, text)
         pieces = obj.collision_pieces()

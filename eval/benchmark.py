@@ -51,19 +51,21 @@ from tqdm import tqdm
 from models.hands import available_hands, load_hand
 from models.objects import ObjectModel, make_object
 from models.objects.views import random_turn, single_view_object, turned
-from planner.functional import FunctionalPlanner, PlannerSettings
+from planner.functional import FunctionalPlanner
 from planner.intent import check_configuration
 from planner.labels import grasp_part
+from planner.settings import LearnedSettings, PlannerSettings, ScheduleSettings, with_overrides
 from planner.validation import validate
 
+# each method's settings over the defaults, as planner.settings.with_overrides keys
 METHODS: dict[str, dict[str, Any]] = {
     "learned": {"proposer": "learned"},  # interaction diffusion -> D(R,O) -> Drake -> MuJoCo
-    "no_dro": {"proposer": "learned", "learned_dro": False},  # wrist + anchors into Drake
+    "no_dro": {"proposer": "learned", "learned.dro": False},  # wrist + anchors into Drake
     # D(R,O) -> every point's target -> joints fitted without collision constraints (D(R,O)
     # Grasp's way; the grasp program is not run)
-    "no_drake": {"proposer": "learned", "learned_solver": "fit"},
+    "no_drake": {"proposer": "learned", "learned.solver": "fit"},
     # D(R,O) trained and run on a uniformly sampled object cloud (the paper's Table 3)
-    "no_anchors": {"proposer": "learned", "learned_dro_weights": "dro_no_anchors"},
+    "no_anchors": {"proposer": "learned", "learned.dro_weights": "dro_no_anchors"},
     # [wrist, joints] drawn by one diffusion model, validated as drawn (Scene-Diffuser's way)
     "direct": {"proposer": "direct"},
     "model": {"proposer": "model"},  # the model-based planner, part labels given
@@ -138,8 +140,10 @@ def run_task(task: tuple) -> Record:
     key = (method, hand_name)
     if key not in _PLANNERS:
         settings = PlannerSettings(
-            max_candidates=max_candidates, learned_samples=samples, **METHODS[method]
+            schedule=ScheduleSettings(max_candidates=max_candidates),
+            learned=LearnedSettings(samples=samples),
         )
+        settings = with_overrides(settings, METHODS[method])
         _PLANNERS[key] = FunctionalPlanner(hand_name, settings)
     planner = _PLANNERS[key]
     oracle = METHODS[method]["proposer"] == "model"

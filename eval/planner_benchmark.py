@@ -15,16 +15,18 @@ import statistics
 import time
 from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import asdict, dataclass, field, fields, replace
+from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 
 import numpy as np
 from tqdm import tqdm
 
+from models.errors import PlanningError
 from models.hands import available_hands
 from models.objects import HELDOUT, categories, instructions, make_object, seeds
 from planner.commands.validate import parse_overrides
-from planner.functional import FunctionalPlanner, PlannerSettings
+from planner.functional import FunctionalPlanner
+from planner.settings import PlannerSettings, ScheduleSettings, with_overrides
 
 
 @dataclass
@@ -79,18 +81,13 @@ _PLANNERS: dict[str, FunctionalPlanner] = {}
 
 
 def planner_settings(max_candidates: int, overrides: Sequence[str] = ()) -> PlannerSettings:
-    """PlannerSettings with `field=value` overrides; `program.field=value` sets ProgramSettings."""
-    settings = PlannerSettings(max_candidates=max_candidates)
-    for key, value in parse_overrides(list(overrides)).items():
-        name = key.removeprefix("program.")
-        target = settings.program if key.startswith("program.") else settings
-        if name not in target.__dataclass_fields__:
-            raise SystemExit(f"--set {key}: expected FIELD=VALUE with a PlannerSettings field")
-        if target is settings:
-            settings = replace(settings, **{name: value})
-        else:
-            settings = replace(settings, program=replace(settings.program, **{name: value}))
-    return settings
+    """PlannerSettings with `--set` overrides (`schedule.solve_batch=2`, `intent.aware=False`,
+    `program.major_iterations=60`; planner.settings.with_overrides)."""
+    settings = PlannerSettings(schedule=ScheduleSettings(max_candidates=max_candidates))
+    try:
+        return with_overrides(settings, parse_overrides(list(overrides)))
+    except PlanningError as err:
+        raise SystemExit(f"--set: {err}") from None
 
 
 def run_pair(args: tuple[str, str, int, str, int, tuple[str, ...]]) -> PairRecord:
@@ -260,8 +257,9 @@ def main() -> None:
         "--set",
         nargs="*",
         default=[],
-        metavar="FIELD=VALUE",
-        help="planner setting overrides, e.g. solve_batch=2 program.major_iterations=60",
+        metavar="KEY=VALUE",
+        help="planner setting overrides by dotted key, e.g. schedule.solve_batch=2 "
+        "intent.aware=False program.major_iterations=60 (planner/settings.py)",
     )
     parser.add_argument(
         "--by-part",

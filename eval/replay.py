@@ -2,12 +2,13 @@
 
 A candidate's solve and verdict do not depend on the order in which the planner reaches them,
 so on benchmark records in which every proposal was solved and every solved candidate validated
-(`eval.planner_benchmark --candidates 24 --set validate_all=True --out RECORDS.jsonl`: the 16
-proposals and LEAP's 8 pinches after them), running the policy of `planner.schedule` with other
-settings gives what planning with them would give.
+(`eval.planner_benchmark --candidates 24 --set schedule.validate_all=True --out RECORDS.jsonl`:
+the 16 proposals and LEAP's 8 pinches after them), running the policy of `planner.schedule`
+with other settings gives what planning with them would give.
 Times per grasp are the recorded stage times of the solves and validations the policy uses.
 
-    python -m eval.replay RECORDS.jsonl [--candidates 8] [--set sweep_after=null gate_solves=8]
+    python -m eval.replay RECORDS.jsonl [--candidates 8] \
+        [--set schedule.sweep_after=null schedule.gate_solves=8]
 
 `--retry DEEPER.jsonl` (records of the same pairs made with a deeper squeeze,
 `--set program.squeeze_depth=D program.retry_squeeze_depth=0`) replays a squeeze retry at that
@@ -37,17 +38,18 @@ from planner.functional import CandidateResult, PlannerSettings, Proposal
 from planner.grasp_program import SolveResult
 from planner.intent import IntentCheck
 from planner.schedule import run_schedule
+from planner.settings import setting_keys
 
 # settings that only decide which recorded solves and verdicts are used; the others change the
 # proposals or the solves and need eval.planner_benchmark
 REPLAYABLE = (
-    "solve_batch",
-    "min_quality",
-    "gate_solves",
-    "sweep_after",
-    "ranking",
-    "max_proposals",
-    "pinch_proposals",
+    "schedule.solve_batch",
+    "schedule.min_quality",
+    "schedule.gate_solves",
+    "schedule.sweep_after",
+    "schedule.ranking",
+    "proposals.max_proposals",
+    "proposals.pinch_proposals",
 )
 
 
@@ -135,22 +137,24 @@ def proposals_used(record: PairRecord, settings: PlannerSettings) -> list[dict]:
     # the main ranking: regular proposals and (Hold) the power grasps between them
     rows = [c for c in recorded if c.get("kind", "row") != "pinch"]
     pinches = [c for c in recorded if c.get("kind") == "pinch"]
-    if len(rows) < settings.max_proposals:
+    most = settings.proposals.max_proposals
+    if len(rows) < most:
         raise RecordsError(
             f"{record.hand} {record.category} {record.seed}: {len(rows)} proposals recorded, "
-            f"max_proposals={settings.max_proposals} asked; record every proposal with "
-            "--candidates 24 --set validate_all=True (or replay fewer: --set max_proposals=N)"
+            f"proposals.max_proposals={most} asked; record every proposal with --candidates 24 "
+            "--set schedule.validate_all=True (or replay fewer: --set proposals.max_proposals=N)"
         )
-    wanted = settings.pinch_proposals
+    wanted = settings.proposals.pinch_proposals
     if wanted is None:
         wanted = load_hand(record.hand).meta.pinch_proposals
     if len(pinches) < wanted:
         raise RecordsError(
             f"{record.hand} {record.category} {record.seed}: {len(pinches)} pinch proposals "
-            f"recorded, {wanted} asked; record them with --set pinch_proposals={wanted} "
-            "(or replay fewer: --set pinch_proposals=N; 0 for records made before pinches)"
+            f"recorded, {wanted} asked; record them with --set proposals.pinch_proposals={wanted} "
+            "(or replay fewer: --set proposals.pinch_proposals=N; 0 for records made before "
+            "pinches)"
         )
-    kept = rows[: settings.max_proposals] + pinches[:wanted]
+    kept = rows[:most] + pinches[:wanted]
     return [c | {"rank": i} for i, c in enumerate(kept)]
 
 
@@ -162,7 +166,8 @@ def replay_pair(record: PairRecord, settings: PlannerSettings) -> PairRecord:
     if unvalidated:
         raise RecordsError(
             f"{record.hand} {record.category} {record.seed}: solved candidates {unvalidated} were "
-            "not validated; record with --candidates 24 --set validate_all=True (as many as proposals)"
+            "not validated; record with --candidates 24 --set schedule.validate_all=True (as many "
+            "as proposals)"
         )
     verdicts = {c["rank"]: (bool(c["success"]), c["part"]) for c in recorded}
 
@@ -219,7 +224,7 @@ def main() -> None:
         "--set",
         nargs="*",
         default=[],
-        metavar="FIELD=VALUE",
+        metavar="KEY=VALUE",
         help=f"policy settings: {', '.join(REPLAYABLE)}",
     )
     parser.add_argument(
@@ -234,7 +239,7 @@ def main() -> None:
     args = parser.parse_args()
     for item in args.set:
         name = item.partition("=")[0].strip()
-        if name not in REPLAYABLE:
+        if name in setting_keys() and name not in REPLAYABLE:  # unknown ones: planner_settings
             raise SystemExit(
                 f"--set {name}: changes proposals or solves, which records cannot replay; "
                 f"replayable: {', '.join(REPLAYABLE)}"

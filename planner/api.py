@@ -2,9 +2,10 @@
 
 `from planner import plan_grasp` gives this function: it refuses bad settings, hands, texts and
 objects with a `DrograspError` (a zero approach step once divided by zero, a tiny one asked for
-terabytes, `solve_batch=0` never ended), plans with `planner.functional`, and writes the object
-reference into every returned grasp's metrics (`metrics["object"]`), so a grasp planned from the
-API can be saved and viewed again (`drograsp view g.json`) like one from `drograsp plan`.
+terabytes, `schedule.solve_batch=0` never ended), plans with `planner.functional`, and writes
+the object reference into every returned grasp's metrics (`metrics["object"]`), so a grasp
+planned from the API can be saved and viewed again (`drograsp view g.json`) like one from
+`drograsp plan`.
 """
 
 from __future__ import annotations
@@ -22,31 +23,39 @@ class SettingsError(DrograspError, ValueError):
     """A planner setting of the wrong kind or out of range."""
 
 
-# (low, high) bounds of numeric settings; None: unbounded on that side. Integers must be int.
-_RANGES: dict[str, tuple[float | None, float | None]] = {
-    "max_candidates": (1, None),
-    "max_proposals": (1, None),
-    "approach_step_deg": (1.0, 360.0),  # below 1 degree: 720+ proposals per part, for nothing
-    "approach_clearance": (0.0, None),
-    "palm_margin": (0.0, None),
-    "border_margin": (0.0, None),
-    "span_factor": (1e-6, None),
-    "pinch_proposals": (0, None),
-    "solve_batch": (1, None),
-    "gate_solves": (0, None),
-    "sweep_after": (0, None),
-    "contact_distance": (1e-6, None),
-    "learned_samples": (1, None),
-    "learned_guidance": (0.0, None),
-    "learned_seed": (0, None),
-}
-_PROGRAM_RANGES: dict[str, tuple[float | None, float | None]] = {
-    "major_iterations": (1, None),
-    "anchor_tolerance": (0.0, None),
-    "influence_distance": (0.0, None),
-    "squeeze_depth": (0.0, None),
-    "retry_squeeze_depth": (0.0, None),
-    "pregrasp_clearance": (0.0, None),
+# (low, high) bounds of numeric settings per group of PlannerSettings; None: unbounded on that
+# side. Integers must be int.
+_RANGES: dict[str, dict[str, tuple[float | None, float | None]]] = {
+    "schedule": {
+        "max_candidates": (1, None),
+        "solve_batch": (1, None),
+        "gate_solves": (0, None),
+        "sweep_after": (0, None),
+        "contact_distance": (1e-6, None),
+    },
+    "proposals": {
+        "max_proposals": (1, None),
+        "approach_step_deg": (1.0, 360.0),  # below 1 degree: 720+ proposals per part, for nothing
+        "approach_clearance": (0.0, None),
+        "palm_margin": (0.0, None),
+        "border_margin": (0.0, None),
+        "span_factor": (1e-6, None),
+        "pinch_proposals": (0, None),
+    },
+    "intent": {},
+    "learned": {
+        "samples": (1, None),
+        "guidance": (0.0, None),
+        "seed": (0, None),
+    },
+    "program": {
+        "major_iterations": (1, None),
+        "anchor_tolerance": (0.0, None),
+        "influence_distance": (0.0, None),
+        "squeeze_depth": (0.0, None),
+        "retry_squeeze_depth": (0.0, None),
+        "pregrasp_clearance": (0.0, None),
+    },
 }
 
 
@@ -104,7 +113,7 @@ def _check_fields(
 def check_settings(settings: Any = None) -> Any:
     """`settings` (a `PlannerSettings`, or None for the defaults) checked: every field of the
     right kind, finite and in range, the validation protocol known. Returns the settings."""
-    from planner.functional import PlannerSettings
+    from planner.settings import GROUPS, PlannerSettings
     from planner.validation.protocol import Protocol, get_protocol
 
     if settings is None:
@@ -112,18 +121,20 @@ def check_settings(settings: Any = None) -> Any:
     if not isinstance(settings, PlannerSettings):
         raise SettingsError(
             f"settings must be a planner.functional.PlannerSettings, got "
-            f"{type(settings).__name__}; e.g. PlannerSettings(max_candidates=4)"
+            f"{type(settings).__name__}; e.g. "
+            "PlannerSettings(schedule=ScheduleSettings(max_candidates=4))"
         )
-    _check_fields(settings, "settings", _RANGES)
+    _check_fields(settings, "settings", {})
     if not isinstance(settings.protocol, str | Protocol):
         raise SettingsError(
             f"settings.protocol must be a preset name or a Protocol, got {settings.protocol!r}"
         )
     get_protocol(settings.protocol)
-    if dataclasses.is_dataclass(settings.program):
-        _check_fields(settings.program, "settings.program", _PROGRAM_RANGES)
-    else:
-        raise SettingsError("settings.program must be a ProgramSettings")
+    for name, group in GROUPS.items():
+        value = getattr(settings, name)
+        if not isinstance(value, group):
+            raise SettingsError(f"settings.{name} must be a {group.__name__}, got {value!r}")
+        _check_fields(value, f"settings.{name}", _RANGES[name])
     return settings
 
 

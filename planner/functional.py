@@ -100,7 +100,7 @@ class FunctionalPlanner:
                 f"part {part!r} is not a part of this object; its parts are {', '.join(obj.part_names)}"
             )
         start = time.perf_counter()
-        meaning = intent_definition(obj, instruction) if self.settings.intent_aware else None
+        meaning = intent_definition(obj, instruction) if self.settings.intent.aware else None
         program = grasp_program(self.hand, obj.collision_pieces(), self.settings.program)
         build = time.perf_counter() - start
         proposals = self.propose(obj, part, meaning)
@@ -146,13 +146,13 @@ class FunctionalPlanner:
         program = grasp_program(self.hand, obj.collision_pieces(), s.program)
         build = time.perf_counter() - start
         draw = direct_proposals if direct else learned_proposals
-        drawn = draw(obj, text, self.hand, s.learned_samples, s.learned_seed, s.learned_guidance)
+        drawn = draw(obj, text, self.hand, s.learned.samples, s.learned.seed, s.learned.guidance)
         proposals = []
         for i in range(len(drawn.wrists)):
             wrist, anchors = rounded(drawn.wrists[i]), rounded(drawn.anchors[i])
             pending = None
-            if s.learned_dro and not direct:
-                key = (s.learned_seed, i)
+            if s.learned.dro and not direct:
+                key = (s.learned.seed, i)
                 pending = partial(
                     dro_targets,
                     obj,
@@ -161,7 +161,7 @@ class FunctionalPlanner:
                     wrist,
                     anchors,
                     key,
-                    weights=s.learned_dro_weights,
+                    weights=s.learned.dro_weights,
                 )
             if drawn.q is None:  # the program starts from the open pose
                 q = self.hand.open_pose.astype(np.float64).copy()
@@ -185,7 +185,7 @@ class FunctionalPlanner:
             obj,
             instruction,
             part,
-            known and s.intent_aware,
+            known and s.intent.aware,
             proposals,
             (program, program, None),
             times,
@@ -251,12 +251,12 @@ class FunctionalPlanner:
     def _intent_program(
         self, obj: ObjectModel, meaning: Definition
     ) -> tuple[GraspProgram, float | None]:
-        """The grasp program for proposals placed for the intent (its `intent_program`
-        settings and, for Liftup, a table under the object: `liftup_table`) and the table's
+        """The grasp program for proposals placed for the intent (its `intent.program`
+        settings and, for Liftup, a table under the object: `intent.liftup_table`) and the table's
         top height (None: no table)."""
-        changes = {k: v for i, k, v in self.settings.intent_program if i == meaning.intent}
+        changes = {k: v for i, k, v in self.settings.intent.program if i == meaning.intent}
         pieces, top = list(obj.collision_pieces()), None
-        if meaning.intent == "Liftup" and self.settings.liftup_table:
+        if meaning.intent == "Liftup" and self.settings.intent.liftup_table:
             table = table_under(obj)
             pieces.append(table)
             top = float(table[:, 2].max())
@@ -273,7 +273,7 @@ class FunctionalPlanner:
             times["dro"] = time.perf_counter() - t0
         if proposal.kind == "direct":
             solved = as_drawn(program, proposal)
-        elif proposal.kind == "learned" and self.settings.learned_solver == "fit":
+        elif proposal.kind == "learned" and self.settings.learned.solver == "fit":
             solved = fitted(program, proposal)
         else:
             solved = program.solve(
@@ -292,7 +292,7 @@ class FunctionalPlanner:
         if solved.ok:
             t0 = time.perf_counter()
             points, inward = program.contacts(
-                solved.wrist, solved.q, self.settings.contact_distance
+                solved.wrist, solved.q, self.settings.schedule.contact_distance
             )
             if table_top is not None:  # the table is no contact with the object
                 on_table = (points[:, 2] <= table_top + 1e-4) & (inward[:, 2] < -0.9)

@@ -7,7 +7,7 @@ near contact each point is predicted). Both go to the same grasp program as the 
 proposals (planner.functional): anchors with their surface normals, the open pose as the
 starting configuration, and the point targets the program pulls toward (`point_weights`:
 closeness, so far points weigh little). The samples are solved best anchor closure first, as
-the model-based ones. `fitted` is the ablation without Drake (`PlannerSettings.learned_solver`
+the model-based ones. `fitted` is the ablation without Drake (`PlannerSettings.learned.solver`
 "fit"): the joints fitted to the targets with no collision constraints. `direct_proposals` and
 `as_drawn` are the ablation of direct diffusion (`PlannerSettings.proposer` "direct"): wrist and
 joints drawn by one model and validated as drawn.

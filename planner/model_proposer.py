@@ -96,7 +96,7 @@ class ModelProposer:
         self, obj: ObjectModel, part: str, intent: Definition | None = None
     ) -> list[Proposal]:
         """Wrist poses and anchors on `part`, best first; shaped by the intent's definition
-        where one is given and `intent_aware` is set (`_Shape`)."""
+        where one is given and `intent.aware` is set (`_Shape`)."""
         points, normals, labels = obj.points, obj.normals, obj.point_labels
         mask = labels == obj.part_names.index(part)
         pts, nrm = points[mask], normals[mask]
@@ -109,11 +109,11 @@ class ModelProposer:
         e1, e2, e3 = _canonical_axes(axes)
         geo = self.geometry
         tree = cKDTree(points)
-        palm_on_thin = self.settings.palm_on_thin_parts
+        palm_on_thin = self.settings.proposals.palm_on_thin_parts
         if palm_on_thin is None:
             palm_on_thin = self.hand.meta.palm_on_thin_parts
         # a palm target unless the planner does without, or the part is too thin for this hand
-        with_palm = self.settings.use_palm and (
+        with_palm = self.settings.proposals.use_palm and (
             palm_on_thin or not self._thin(pts - centre, e2, e3)
         )
         # Anchors sit on the part as near the object's centre of mass as the part allows: a
@@ -121,9 +121,9 @@ class ModelProposer:
         com = points.mean(axis=0)
         plain = _Shape(self._away_from_border(points[~mask], pts), self._frames(e1, e2, e3))
         shape = plain
-        if intent is not None and self.settings.intent_aware:
+        if intent is not None and self.settings.intent.aware:
             shape = self._shape(obj, mask, intent, plain, (e1, e2, e3))
-        pinches = self.settings.pinch_proposals
+        pinches = self.settings.proposals.pinch_proposals
         if pinches is None:
             pinches = self.hand.meta.pinch_proposals
 
@@ -139,7 +139,11 @@ class ModelProposer:
                 if shape.target is not None:
                     t_mass = float((shape.target - centre) @ axis)
                 else:
-                    t_mass = float((com - centre) @ axis) if self.settings.mass_centred else 0.0
+                    t_mass = (
+                        float((com - centre) @ axis)
+                        if self.settings.proposals.mass_centred
+                        else 0.0
+                    )
                 spacing = min(geo.spacing, max(np.ptp(t) / 3, 0.005))
                 frame = (pts, nrm, t, shape.away, t_mass, centre, rot, u, v, axis)
                 rows.append(self._proposal(*frame, spacing, tree, with_palm, shape.toward_palm))
@@ -163,7 +167,7 @@ class ModelProposer:
         # Pinches come after every regular proposal: mixed into their ranking by anchor closure
         # they did worse for every hand on the val replays (docs/planner_log.md "Pinch proposals").
         pinch = self._ordered(pinch, com)[:pinches]
-        most = self.settings.max_proposals
+        most = self.settings.proposals.max_proposals
         if palm:  # Hold: power grasps and regular proposals in turn
             rows = _alternate(self._ordered(palm, com), self._ordered(rows, com))
         elif shape.mix:  # the intent's proposals and proposals by part alone in turn
@@ -176,7 +180,7 @@ class ModelProposer:
         """(palm -> object direction, finger row axis, row sign): the palm facing the part from
         every `approach_step_deg` around its long axis, the finger row along it either way."""
         frames = []
-        for theta in np.deg2rad(np.arange(0, 360, self.settings.approach_step_deg)):
+        for theta in np.deg2rad(np.arange(0, 360, self.settings.proposals.approach_step_deg)):
             v = rounded(np.cos(theta) * e2 + np.sin(theta) * e3)
             frames += [(v, e1, 1.0), (v, e1, -1.0)]
         return frames
@@ -185,7 +189,7 @@ class ModelProposer:
         """Liftup: the palm facing down (straight, and tilted by `liftup_tilt_deg` at
         `liftup_azimuths` azimuths), the finger row along the part's long axis as seen from
         above and at 45-degree steps from it."""
-        s = self.settings
+        s = self.settings.intent
         down = np.array([0.0, 0.0, -1.0])
         dirs = [down]
         tilt = np.deg2rad(s.liftup_tilt_deg)
@@ -258,8 +262,8 @@ class ModelProposer:
             return _Shape(away, frames, target=target, mix=True, shaped_rows=True)
         if intent.intent == "Liftup":
             height = pts[:, 2]
-            if np.ptp(height) > self.settings.liftup_reach:
-                upper = away & (height >= height.max() - self.settings.liftup_reach)
+            if np.ptp(height) > self.settings.intent.liftup_reach:
+                upper = away & (height >= height.max() - self.settings.intent.liftup_reach)
                 away = upper if upper.sum() >= 8 else away
             frames = self._liftup_frames(axes[0], axes[1])
             return _Shape(away, frames, toward_palm=0.5, mix=True, shaped_rows=True)
@@ -278,7 +282,7 @@ class ModelProposer:
         the top quarter of proposals by anchor epsilon held 30-70% of the time (bottom quarter
         5-9%), while the palm-clearance score did not predict holding (docs/planner_log.md,
         "Proposal order")."""
-        if self.settings.proposal_order == "anchors":
+        if self.settings.proposals.proposal_order == "anchors":
             for p in proposals:  # about 5 ms each (a 6-D hull of 24 cone edges)
                 used = anchored(p.anchors)
                 p.anchor_quality = rounded(
@@ -299,7 +303,7 @@ class ModelProposer:
         if len(others) == 0:
             return np.ones(len(pts), dtype=bool)
         border, _ = cKDTree(others).query(pts)
-        return border >= min(self.settings.border_margin, 0.5 * float(border.max()))
+        return border >= min(self.settings.proposals.border_margin, 0.5 * float(border.max()))
 
     def _palm_first(self, pts, nrm, away, t_mass, centre, rot, v, axis, tree) -> Proposal:
         """A power grasp for Hold: the palm centre `palm_margin` off the part's near side
@@ -313,7 +317,7 @@ class ModelProposer:
         if not near_line.any():
             near_line = np.ones(len(pts), dtype=bool)
         nearest = pts[near_line][np.argmin(pts[near_line] @ v)]
-        palm_target = nearest - v * self.settings.palm_margin
+        palm_target = nearest - v * self.settings.proposals.palm_margin
         position = palm_target - rot.apply(np.asarray(self.hand.meta.palm.center, dtype=float))
         tips = rot.apply(geo.half_tips) + position
         allowed = np.flatnonzero(away)
@@ -321,7 +325,7 @@ class ModelProposer:
         chosen = allowed[snap]
         anchors, normals = pts[chosen], nrm[chosen]
         palm_clear = min(
-            float(tree.query(palm_target - v * self.settings.approach_clearance)[0]), 0.1
+            float(tree.query(palm_target - v * self.settings.proposals.approach_clearance)[0]), 0.1
         )
         wrist = np.concatenate([position, rot.as_quat(scalar_first=True)])
         return Proposal(
@@ -379,7 +383,7 @@ class ModelProposer:
 
         chosen = [extreme(t_mid, -u), *fingers()]
         span = np.linalg.norm(pts[chosen[1:]].mean(axis=0) - pts[chosen[0]])
-        if span > self.settings.span_factor * geo.span:
+        if span > self.settings.proposals.span_factor * geo.span:
             row = fingers(toward_palm=1.0)
             thumb = _across(pts, nrm, away, pts[row[1]], -u)
             if thumb is not None:
@@ -390,7 +394,7 @@ class ModelProposer:
         position = centres.mean(axis=0) - rot.apply(geo.half_tips[:n_used].mean(axis=0))
         free = np.full((len(geo.tip_radii) - n_used, 3), np.nan)  # a pinch's free fingers
         anchors, normals = np.vstack([anchors, free]), np.vstack([normals, free])
-        palm = centres.mean(axis=0) - v * self.settings.approach_clearance
+        palm = centres.mean(axis=0) - v * self.settings.proposals.approach_clearance
         clearance = min(float(tree.query(palm)[0]), 0.1)
         mid = pts[chosen].mean(axis=0)
         outward = float(-v @ (mid - centre))
@@ -401,7 +405,7 @@ class ModelProposer:
         palm_target = None
         if with_palm and near_line.any():
             nearest = pts[near_line][np.argmin(pts[near_line] @ v)]
-            palm_target = nearest - v * self.settings.palm_margin
+            palm_target = nearest - v * self.settings.proposals.palm_margin
         score = clearance + 0.1 * outward
         # rounded: proposals are the same on every machine (models.reproducible)
         return Proposal(

@@ -28,13 +28,14 @@ class Proposal:
     score: float  # free space for the palm plus outwardness: breaks anchor-quality ties
     palm_target: np.ndarray | None = None
     # epsilon (planner.quality) of the anchors pushing along their inward normals, about the
-    # object's centre of mass: the solve order, best first (set with proposal_order="anchors")
+    # object's centre of mass: the solve order, best first (with
+    # proposals.proposal_order="anchors")
     anchor_quality: float = -1.0
     # "row": thumb against a row of the other anchor fingers; "pinch": thumb and the next
     # two anchor fingers, the last one free; "palm": a power grasp, palm first (Hold)
     kind: str = "row"
     # placed for the instruction's intent (not by part alone): solved with the intent's
-    # program settings (`intent_program`) and, for Liftup, above a table
+    # program settings (`intent.program`) and, for Liftup, above a table
     shaped: bool = False
     # targets for hand surface points (learned proposals: D(R,O) after multilateration), with
     # their weights (GraspTargets.point_targets); None: none

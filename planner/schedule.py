@@ -54,8 +54,8 @@ def run_schedule(
     settings: PlannerSettings,
 ) -> Scheduled:
     """Solve proposals 0..count-1 a batch at a time and validate the solved candidates best
-    first, until one holds on `part` and meets its intent, or `settings.max_candidates` are
-    validated.
+    first, until one holds on `part` and meets its intent, or `max_candidates` are validated
+    (the fields named here are those of `settings.schedule`).
 
     Candidates whose solved configuration meets the intent (`intent_ok`, planner.intent) are
     validated before the others for the first `intent_first` validations; after them the
@@ -70,7 +70,7 @@ def run_schedule(
     solved before the next validation (even in the middle of a batch's queue), and the remaining
     validations go to the best of all of them. `validate` fills the candidate's `success` and
     `part`; `order` is set here."""
-    s = settings
+    s = settings.schedule
     candidates: list[CandidateResult] = []
     queue: list[CandidateResult] = []  # solved, released by the gate, not yet validated
     deferred: list[CandidateResult] = []  # solved with weak closure, held back by the gate

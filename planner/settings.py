@@ -1,11 +1,17 @@
 """How the planner plans: every knob of FunctionalPlanner, with why each default is what it is.
 
 Kept apart from the planner so the schedule (planner.schedule), the proposers and the API's
-checks (planner.api.check_settings) can read them without importing the planner.
+checks (planner.api.check_settings) can read them without importing the planner. The knobs
+are grouped by concern: `schedule` (what is validated, in which order), `proposals` (the
+model-based proposer), `intent` (shaping by the instruction's intent), `learned` (the learned
+stages) and `program` (the grasp program); `with_overrides` sets them by dotted keys
+(`schedule.solve_batch`, `intent.aware`, `program.major_iterations`, `protocol`).
 """
 
 from __future__ import annotations
 
+import dataclasses
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 from models.errors import PlanningError
@@ -14,31 +20,10 @@ from planner.grasp_program import ProgramSettings
 
 
 @dataclass(frozen=True)
-class PlannerSettings:
+class ScheduleSettings:
+    """What is solved and validated, and in which order (planner.schedule)."""
+
     max_candidates: int = 8  # grasps validated at most (the costly step)
-    max_proposals: int = 16  # wrist poses + anchors solved at most
-    approach_step_deg: float = 45.0  # approach directions around the part's long axis
-    protocol: str = "paper"
-    approach_clearance: float = 0.06  # m from the anchors' centre to test the palm's free space
-    palm_margin: float = 0.004  # m between the palm target and the part's near surface
-    # anchors keep this far (m) from the instructed part's border with other parts, or half the
-    # part's widest border distance where the part is smaller: the outermost points of a bowl's
-    # body lie just below its rim, and grasps there voted "rim" though they held
-    border_margin: float = 0.005
-    # anchors planned farther apart (thumb to the fingers' mean) than this many times the
-    # hand's half-closed thumb-finger span cannot be reached (a pan's body, 17-19 cm across):
-    # the fingers then go to the part's side nearest the palm and the thumb straight across
-    # the part from them, pinching its near edge or wall
-    span_factor: float = 1.25
-    # May proposals on parts thinner than an anchor fingertip (pens, knife handles) carry a palm
-    # target? None: as the hand's hand.json `palm_on_thin_parts` says (default true; false for
-    # Allegro, docs/planner_log.md "No palm target on thin parts").
-    palm_on_thin_parts: bool | None = None
-    use_palm: bool = True
-    # pinch proposals (thumb and the next two anchor fingers, the last anchor finger free)
-    # solved after the max_proposals regular ones; None: as the hand's hand.json
-    # `pinch_proposals` says (default 0; 8 for LEAP, docs/planner_log.md "Pinch proposals")
-    pinch_proposals: int | None = None
     # proposals solved before the best of them are validated. With the anchor-closure order the
     # first proposals are the likeliest to hold, so small batches waste fewer solves: on the 300
     # test pairs 2 vs 4 gave the same returned rates, first-candidate 65/69/68% vs 70/70/68%
@@ -68,16 +53,7 @@ class PlannerSettings:
     # holds on the part: solves are already paid for, so each extra validation is the cheapest
     # way to another grasp (dataset generation keeps them all, see PlanResult.holding).
     validate_all: bool = False
-    mass_centred: bool = True  # anchors near the object's centre of mass along the part
     ranking: str = "task"  # validation order: "task" or "epsilon" (planner.quality)
-    # solve order of the proposals: "anchors" (force closure of the planned anchors, best
-    # first) or "clearance" (free space for the palm, the earlier order)
-    proposal_order: str = "anchors"
-    # Shape proposals by the instruction's intent (models/objects/intents.py): Liftup from
-    # above, Handover and Use with anchors kept off the parts the hand must leave free, and
-    # validate candidates whose solved configuration meets the intent first (planner.schedule).
-    # False: proposals by part alone, as before the intent definitions.
-    intent_aware: bool = True
     # validations in which candidates meeting the intent go first; then by quality alone
     intent_first: int = 4
     # after a grasp held on the part but missed its intent: proposals solved at most to find
@@ -86,6 +62,69 @@ class PlannerSettings:
     # intent; searching every proposal (before the by-part proposals were added in turn),
     # 83/65/77% (docs/intent_log.md)
     intent_search: int | None = None
+
+    def __post_init__(self) -> None:
+        if self.ranking not in RANKINGS:
+            raise PlanningError(f"unknown schedule.ranking {self.ranking!r}; use one of {RANKINGS}")
+        if self.intent_first < 0 or (self.intent_search is not None and self.intent_search < 0):
+            raise PlanningError(
+                "schedule.intent_first and schedule.intent_search must be 0 or more "
+                f"(intent_search None: no limit), got {self.intent_first} and {self.intent_search}"
+            )
+
+
+@dataclass(frozen=True)
+class ProposalSettings:
+    """The model-based proposer's wrist poses and anchors (planner.model_proposer)."""
+
+    max_proposals: int = 16  # wrist poses + anchors solved at most
+    approach_step_deg: float = 45.0  # approach directions around the part's long axis
+    approach_clearance: float = 0.06  # m from the anchors' centre to test the palm's free space
+    palm_margin: float = 0.004  # m between the palm target and the part's near surface
+    # anchors keep this far (m) from the instructed part's border with other parts, or half the
+    # part's widest border distance where the part is smaller: the outermost points of a bowl's
+    # body lie just below its rim, and grasps there voted "rim" though they held
+    border_margin: float = 0.005
+    # anchors planned farther apart (thumb to the fingers' mean) than this many times the
+    # hand's half-closed thumb-finger span cannot be reached (a pan's body, 17-19 cm across):
+    # the fingers then go to the part's side nearest the palm and the thumb straight across
+    # the part from them, pinching its near edge or wall
+    span_factor: float = 1.25
+    # May proposals on parts thinner than an anchor fingertip (pens, knife handles) carry a palm
+    # target? None: as the hand's hand.json `palm_on_thin_parts` says (default true; false for
+    # Allegro, docs/planner_log.md "No palm target on thin parts").
+    palm_on_thin_parts: bool | None = None
+    use_palm: bool = True
+    # pinch proposals (thumb and the next two anchor fingers, the last anchor finger free)
+    # solved after the max_proposals regular ones; None: as the hand's hand.json
+    # `pinch_proposals` says (default 0; 8 for LEAP, docs/planner_log.md "Pinch proposals")
+    pinch_proposals: int | None = None
+    mass_centred: bool = True  # anchors near the object's centre of mass along the part
+    # solve order of the proposals: "anchors" (force closure of the planned anchors, best
+    # first) or "clearance" (free space for the palm, the earlier order)
+    proposal_order: str = "anchors"
+
+    def __post_init__(self) -> None:
+        if self.pinch_proposals is not None and self.pinch_proposals < 0:
+            raise PlanningError(
+                f"proposals.pinch_proposals must be 0 or more, got {self.pinch_proposals}"
+            )
+        if self.proposal_order not in PROPOSAL_ORDERS:
+            raise PlanningError(
+                f"unknown proposals.proposal_order {self.proposal_order!r}; use one of "
+                f"{PROPOSAL_ORDERS}"
+            )
+
+
+@dataclass(frozen=True)
+class IntentSettings:
+    """Proposals and programs shaped by the instruction's intent (models/objects/intents.py)."""
+
+    # Shape proposals by the instruction's intent (models/objects/intents.py): Liftup from
+    # above, Handover and Use with anchors kept off the parts the hand must leave free, and
+    # validate candidates whose solved configuration meets the intent first (planner.schedule).
+    # False: proposals by part alone, as before the intent definitions.
+    aware: bool = True
     # Liftup: palm directions (palm -> object) tilted this far from straight down, besides
     # straight down, at `liftup_azimuths` azimuths
     liftup_tilt_deg: float = 20.0
@@ -96,13 +135,67 @@ class PlannerSettings:
     # The grasp program's weights per intent (ProgramSettings field -> value), over `program`:
     # Hold pulls the palm onto its target harder (palm contact), Liftup keeps the proposal's
     # palm-down wrist rotation
-    intent_program: tuple[tuple[str, str, float], ...] = (
+    program: tuple[tuple[str, str, float], ...] = (
         ("Hold", "palm_weight", 200.0),
         ("Liftup", "wrist_rotation_weight", 1.0),
     )
     # Liftup: the grasp program keeps the hand above a table slab under the object (the
     # definition: no hand point below the object's lowest point); the table is no contact
     liftup_table: bool = True
+
+    def __post_init__(self) -> None:
+        if not 0 <= self.liftup_tilt_deg < 60 or self.liftup_azimuths < 0:
+            raise PlanningError(
+                "intent.liftup_tilt_deg must be in [0, 60) and intent.liftup_azimuths 0 or "
+                f"more, got {self.liftup_tilt_deg} and {self.liftup_azimuths}"
+            )
+        for intent, name, _ in self.program:
+            if intent not in INTENTS or name not in ProgramSettings.__dataclass_fields__:
+                raise PlanningError(
+                    f"intent.program entry ({intent!r}, {name!r}): expected an intent of "
+                    f"{INTENTS} and a ProgramSettings field"
+                )
+        if self.liftup_reach <= 0:
+            raise PlanningError(f"intent.liftup_reach must be positive, got {self.liftup_reach}")
+
+
+@dataclass(frozen=True)
+class LearnedSettings:
+    """The learned stages: interaction diffusion -> D(R,O) -> solver (planner.learned_proposer)."""
+
+    # interaction samples (proposals) the learned proposer draws. On the 150 test pairs
+    # (`python -m eval.benchmark`, interim weights) 16 vs 8 samples: held on the instructed part
+    # within 8 validations 70/82/66% vs 58/76/58% (allegro/leap/shadow), first sample about
+    # the same, 1-2 s more per pair
+    samples: int = 16
+    dro: bool = True  # D(R,O) point targets in the program (False: wrist + anchors)
+    # the D(R,O) weights: None the shipped network, else a file or a name in learned/weights/
+    # ("dro_no_anchors": the ablation trained without the anchors' contact map)
+    dro_weights: str | None = None
+    # how learned proposals become configurations: "drake" (the grasp program: collision,
+    # coupling and joint-limit constraints) or "fit" (D(R,O) Grasp's way, the ablation
+    # without Drake: every hand point's D(R,O) target, joints fitted to them by least squares
+    # within the limits, no collision constraints; learned.joint_fit)
+    solver: str = "drake"
+    seed: int = 0  # the samples' seed: the same seed, the same proposals
+    guidance: float | None = None  # classifier-free guidance; None: the model's own
+
+    def __post_init__(self) -> None:
+        if self.solver not in LEARNED_SOLVERS:
+            raise PlanningError(
+                f"unknown learned.solver {self.solver!r}; use one of {LEARNED_SOLVERS}"
+            )
+        if self.solver == "fit" and not self.dro:
+            raise PlanningError(
+                'learned.solver="fit" fits the joints to D(R,O)\'s point targets; it needs '
+                "learned.dro=True"
+            )
+
+
+@dataclass(frozen=True)
+class PlannerSettings:
+    """Every knob of FunctionalPlanner: the proposer, the validation protocol and the groups."""
+
     # Where proposals come from: "model" (the geometric proposer of this module: needs part
     # labels and a "[Intent] a [Object] by [Part]" instruction), "learned" (interaction
     # diffusion -> D(R,O), planner.learned_proposer: any cloud, any sentence) or "auto": model
@@ -112,65 +205,65 @@ class PlannerSettings:
     # direct diffusion: wrist and joints drawn by one model (weights "direct"), no anchors, no
     # D(R,O) and no solver, validated as drawn (the paper's Scene-Diffuser comparison).
     proposer: str = "auto"
-    # interaction samples (proposals) the learned proposer draws. On the 150 test pairs
-    # (`python -m eval.benchmark`, interim weights) 16 vs 8 samples: held on the instructed part
-    # within 8 validations 70/82/66% vs 58/76/58% (allegro/leap/shadow), first sample about
-    # the same, 1-2 s more per pair
-    learned_samples: int = 16
-    learned_dro: bool = True  # D(R,O) point targets in the program (False: wrist + anchors)
-    # the D(R,O) weights: None the shipped network, else a file or a name in learned/weights/
-    # ("dro_no_anchors": the ablation trained without the anchors' contact map)
-    learned_dro_weights: str | None = None
-    # how learned proposals become configurations: "drake" (the grasp program: collision,
-    # coupling and joint-limit constraints) or "fit" (D(R,O) Grasp's way, the ablation
-    # without Drake: every hand point's D(R,O) target, joints fitted to them by least squares
-    # within the limits, no collision constraints; learned.joint_fit)
-    learned_solver: str = "drake"
-    learned_seed: int = 0  # the samples' seed: the same seed, the same proposals
-    learned_guidance: float | None = None  # classifier-free guidance; None: the model's own
+    protocol: str = "paper"
+    schedule: ScheduleSettings = field(default_factory=ScheduleSettings)
+    proposals: ProposalSettings = field(default_factory=ProposalSettings)
+    intent: IntentSettings = field(default_factory=IntentSettings)
+    learned: LearnedSettings = field(default_factory=LearnedSettings)
     program: ProgramSettings = field(default_factory=ProgramSettings)
 
     def __post_init__(self) -> None:
-        if self.ranking not in RANKINGS:
-            raise PlanningError(f"unknown ranking {self.ranking!r}; use one of {RANKINGS}")
-        if self.pinch_proposals is not None and self.pinch_proposals < 0:
-            raise PlanningError(f"pinch_proposals must be 0 or more, got {self.pinch_proposals}")
-        if self.proposal_order not in PROPOSAL_ORDERS:
-            raise PlanningError(
-                f"unknown proposal_order {self.proposal_order!r}; use one of {PROPOSAL_ORDERS}"
-            )
-        if not 0 <= self.liftup_tilt_deg < 60 or self.liftup_azimuths < 0:
-            raise PlanningError(
-                "liftup_tilt_deg must be in [0, 60) and liftup_azimuths 0 or more, got "
-                f"{self.liftup_tilt_deg} and {self.liftup_azimuths}"
-            )
-        for intent, name, _ in self.intent_program:
-            if intent not in INTENTS or name not in ProgramSettings.__dataclass_fields__:
-                raise PlanningError(
-                    f"intent_program entry ({intent!r}, {name!r}): expected an intent of "
-                    f"{INTENTS} and a ProgramSettings field"
-                )
-        if self.intent_first < 0 or (self.intent_search is not None and self.intent_search < 0):
-            raise PlanningError(
-                "intent_first and intent_search must be 0 or more (intent_search None: no "
-                f"limit), got {self.intent_first} and {self.intent_search}"
-            )
         if self.proposer not in PROPOSERS:
             raise PlanningError(f"unknown proposer {self.proposer!r}; use one of {PROPOSERS}")
-        if self.learned_solver not in LEARNED_SOLVERS:
-            raise PlanningError(
-                f"unknown learned_solver {self.learned_solver!r}; use one of {LEARNED_SOLVERS}"
-            )
-        if self.learned_solver == "fit" and not self.learned_dro:
-            raise PlanningError(
-                'learned_solver="fit" fits the joints to D(R,O)\'s point targets; it needs '
-                "learned_dro=True"
-            )
-        if self.liftup_reach <= 0:
-            raise PlanningError(f"liftup_reach must be positive, got {self.liftup_reach}")
 
 
 RANKINGS = ("task", "epsilon")
 PROPOSERS = ("auto", "model", "learned", "direct")
 LEARNED_SOLVERS = ("drake", "fit")
 PROPOSAL_ORDERS = ("anchors", "clearance")
+# the groups of PlannerSettings: field name -> settings class
+GROUPS: dict[str, type] = {
+    "schedule": ScheduleSettings,
+    "proposals": ProposalSettings,
+    "intent": IntentSettings,
+    "learned": LearnedSettings,
+    "program": ProgramSettings,
+}
+
+
+def setting_keys() -> list[str]:
+    """Every key `with_overrides` takes: top-level fields, then `group.field` per group."""
+    keys = []
+    for f in dataclasses.fields(PlannerSettings):
+        group = GROUPS.get(f.name)
+        if group is None:
+            keys.append(f.name)
+        else:
+            keys += [f"{f.name}.{g.name}" for g in dataclasses.fields(group)]
+    return keys
+
+
+def with_overrides(settings: PlannerSettings, overrides: Mapping[str, object]) -> PlannerSettings:
+    """`settings` with `overrides` set: dotted keys for a group's field (`schedule.solve_batch`,
+    `intent.aware`, `program.major_iterations`), plain ones for the top level (`protocol`,
+    `proposer`). Each group is replaced once with all of its changes, so that fields checked
+    together (`learned.solver` "fit" with `learned.dro`) can change together. An unknown key
+    raises a PlanningError that lists the valid ones."""
+    keys = setting_keys()
+    top: dict[str, object] = {}
+    grouped: dict[str, dict[str, object]] = {}
+    for key, value in overrides.items():
+        if key not in keys:
+            like = [k for k in keys if k.rpartition(".")[2] == key or k.replace(".", "_") == key]
+            hint = f" (did you mean {like[0]!r}?)" if len(like) == 1 and key not in GROUPS else ""
+            raise PlanningError(
+                f"unknown planner setting {key!r}{hint}; the settings are: {', '.join(keys)}"
+            )
+        group, dot, name = key.partition(".")
+        if dot:
+            grouped.setdefault(group, {})[name] = value
+        else:
+            top[key] = value
+    for group, changes in grouped.items():
+        top[group] = dataclasses.replace(getattr(settings, group), **changes)
+    return dataclasses.replace(settings, **top) if top else settings

@@ -665,6 +665,7 @@ def plan_cases() -> list[Case]:
     from models.objects import make_object
     from planner import plan_grasp
     from planner.functional import PlannerSettings
+    from planner.settings import GROUPS as SETTINGS_GROUPS
 
     cases: list[Case] = []
 
@@ -672,29 +673,36 @@ def plan_cases() -> list[Case]:
         cases.append(Case(name, "plan", fn, expect, check))
 
     obj = make_object("bottle", 1)
-    settings: list[tuple[str, dict]] = [
-        ("approach_step_deg=0", {"approach_step_deg": 0}),
-        ("approach_step_deg=-45", {"approach_step_deg": -45.0}),
-        ("approach_step_deg=nan", {"approach_step_deg": float("nan")}),
-        ("approach_step_deg=1e-9", {"approach_step_deg": 1e-9}),
-        ("max_candidates=0", {"max_candidates": 0}),
-        ("max_candidates=1.5", {"max_candidates": 1.5}),
-        ("max_proposals=0", {"max_proposals": 0}),
-        ("max_proposals=-1", {"max_proposals": -1}),
-        ("solve_batch=0", {"solve_batch": 0}),
-        ("protocol unknown", {"protocol": "nosuch"}),
-        ("protocol 5", {"protocol": 5}),
-        ("span_factor=nan", {"span_factor": float("nan")}),
-        ("contact_distance=-1", {"contact_distance": -1.0}),
-        ("border_margin=inf", {"border_margin": float("inf")}),
-        ("gate_solves=-1", {"gate_solves": -1}),
-        ("sweep_after=-1", {"sweep_after": -1}),
-        ("min_quality=nan", {"min_quality": float("nan")}),
-        ("use_palm='no'", {"use_palm": "no"}),
-        ("approach_clearance=-1", {"approach_clearance": -1.0}),
+    # (group of PlannerSettings or None for its top level, bad field values)
+    settings: list[tuple[str | None, dict]] = [
+        ("proposals", {"approach_step_deg": 0}),
+        ("proposals", {"approach_step_deg": -45.0}),
+        ("proposals", {"approach_step_deg": float("nan")}),
+        ("proposals", {"approach_step_deg": 1e-9}),
+        ("schedule", {"max_candidates": 0}),
+        ("schedule", {"max_candidates": 1.5}),
+        ("proposals", {"max_proposals": 0}),
+        ("proposals", {"max_proposals": -1}),
+        ("schedule", {"solve_batch": 0}),
+        (None, {"protocol": "nosuch"}),
+        (None, {"protocol": 5}),
+        ("proposals", {"span_factor": float("nan")}),
+        ("schedule", {"contact_distance": -1.0}),
+        ("proposals", {"border_margin": float("inf")}),
+        ("schedule", {"gate_solves": -1}),
+        ("schedule", {"sweep_after": -1}),
+        ("schedule", {"min_quality": float("nan")}),
+        ("proposals", {"use_palm": "no"}),
+        ("proposals", {"approach_clearance": -1.0}),
     ]
-    for name, kw in settings:
-        add(f"plan_grasp(settings {name})", lambda kw=kw: plan_grasp(obj, "Hold a bottle by body", "allegro", PlannerSettings(**kw)), "error")  # fmt: skip
+
+    def nested(group: str | None, kw: dict) -> PlannerSettings:
+        return PlannerSettings(**kw) if group is None else PlannerSettings(**{group: SETTINGS_GROUPS[group](**kw)})  # fmt: skip
+
+    for group, kw in settings:
+        ((field, value),) = kw.items()
+        name = f"{field}={value!r}" if group is None else f"{group}.{field}={value!r}"
+        add(f"plan_grasp(settings {name})", lambda group=group, kw=kw: plan_grasp(obj, "Hold a bottle by body", "allegro", nested(group, kw)), "error")  # fmt: skip
     add("plan_grasp(settings dict)", lambda: plan_grasp(obj, "Hold a bottle by body", "allegro", {"a": 1}), "error")  # fmt: skip
     add("plan_grasp(hand unicorn)", lambda: plan_grasp(obj, "Hold a bottle by body", "unicorn"), "error")  # fmt: skip
     add("plan_grasp(hand 5)", lambda: plan_grasp(obj, "Hold a bottle by body", 5), "error")

@@ -192,19 +192,30 @@ def test_variants_rotate_the_ranked_proposals():
     from models.objects import make_object
     from planner.batch.variants import VariantPlanner
     from planner.functional import PlannerSettings
+    from planner.settings import ScheduleSettings
 
     obj = make_object("mug", 0)
-    base = VariantPlanner("allegro", PlannerSettings(max_candidates=100))
+    base = VariantPlanner("allegro", PlannerSettings(schedule=ScheduleSettings(max_candidates=100)))
     ranked = base.propose(obj, "body")
-    shifted = VariantPlanner("allegro", PlannerSettings(max_candidates=3), variant=2)
+    shifted = VariantPlanner(
+        "allegro", PlannerSettings(schedule=ScheduleSettings(max_candidates=3)), variant=2
+    )
     got = shifted.propose(obj, "body")
     assert len(got) == 3  # the third window of 3: ranked proposals 6, 7, 8
     for p, q in zip(got, ranked[6:9], strict=True):
         assert (p.wrist == q.wrist).all() and (p.anchors == q.anchors).all()
     assert shifted.proposal_index(0) == 6
-    wrapped = VariantPlanner("allegro", PlannerSettings(max_candidates=1), variant=len(ranked) - 1)
+    wrapped = VariantPlanner(
+        "allegro",
+        PlannerSettings(schedule=ScheduleSettings(max_candidates=1)),
+        variant=len(ranked) - 1,
+    )
     assert (wrapped.propose(obj, "body")[0].wrist == ranked[-1].wrist).all()
-    wrapped = VariantPlanner("allegro", PlannerSettings(max_candidates=2), variant=len(ranked) // 2)
+    wrapped = VariantPlanner(
+        "allegro",
+        PlannerSettings(schedule=ScheduleSettings(max_candidates=2)),
+        variant=len(ranked) // 2,
+    )
     wrapped.propose(obj, "body")
     assert wrapped.proposal_index(1) == 1  # window wrapped to the start
 

@@ -15,6 +15,7 @@ from models.objects import make_object
 from planner import functional
 from planner.functional import FunctionalPlanner, PlannerSettings
 from planner.grasp_program import PREGRASP_SCALES, GraspTargets, ProgramSettings, grasp_program
+from planner.settings import ProposalSettings
 
 
 def _check_feasible(hand, program, result) -> None:
@@ -312,7 +313,9 @@ def test_a_row_of_nan_anchors_leaves_that_finger_free(hand_name):
     hand = load_hand(hand_name)
     obj = make_object("lotion_pump", 13)
     program = grasp_program(hand, obj.collision_pieces())
-    planner = FunctionalPlanner(hand, PlannerSettings(max_proposals=0, pinch_proposals=1))
+    planner = FunctionalPlanner(
+        hand, PlannerSettings(proposals=ProposalSettings(max_proposals=0, pinch_proposals=1))
+    )
     (pinch,) = planner.propose(obj, "pump")
     result = program.solve(
         GraspTargets(pinch.wrist, pinch.q, pinch.anchors, pinch.normals, pinch.palm_target)
@@ -345,7 +348,7 @@ def test_a_slipping_grasp_is_validated_again_with_the_deeper_squeeze(hand_name, 
     hand = load_hand(hand_name)
     obj = make_object("bottle", 1)
     (proposal,) = FunctionalPlanner(
-        hand, PlannerSettings(max_proposals=1, pinch_proposals=0)
+        hand, PlannerSettings(proposals=ProposalSettings(max_proposals=1, pinch_proposals=0))
     ).propose(obj, "body")
     targets = GraspTargets(proposal.wrist, proposal.q, proposal.anchors, proposal.normals)
     squeezes: list[np.ndarray] = []

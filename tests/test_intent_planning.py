@@ -13,6 +13,7 @@ from models.objects import make_object
 from models.objects.intents import RULES, definition
 from planner.functional import CandidateResult, FunctionalPlanner, PlannerSettings
 from planner.intent import Criterion, IntentCheck, region_points
+from planner.settings import IntentSettings, ProposalSettings, ScheduleSettings
 
 
 @pytest.fixture(scope="module")
@@ -39,9 +40,9 @@ def test_liftup_proposals_face_down(hand_name, mug):
     settings = PlannerSettings()
     meaning = definition("mug", "Liftup", "handle")
     proposals = FunctionalPlanner(hand_name, settings).propose(mug, "handle", meaning)
-    assert len(proposals) >= settings.max_proposals
+    assert len(proposals) >= settings.proposals.max_proposals
     normal = np.asarray(hand.meta.palm.normal, dtype=float)
-    half = settings.max_proposals // 2
+    half = settings.proposals.max_proposals // 2
     # from above and by part alone in turn, in case those from above all slip
     plain = FunctionalPlanner(hand_name, settings).propose(mug, "handle")
     assert [p.wrist.tolist() for p in proposals[1 : 2 * half : 2]] == [
@@ -50,7 +51,7 @@ def test_liftup_proposals_face_down(hand_name, mug):
     for p in proposals[: 2 * half : 2]:
         world = Rotation.from_quat(p.wrist[3:], scalar_first=True).apply(normal)
         tilt = np.degrees(np.arccos(np.clip(-world[2] / np.linalg.norm(world), -1, 1)))
-        assert tilt <= settings.liftup_tilt_deg + 1.0
+        assert tilt <= settings.intent.liftup_tilt_deg + 1.0
     # by part alone the palm faces the handle from every side
     sideways = FunctionalPlanner(hand_name, settings).propose(mug, "handle")
     tilts = [Rotation.from_quat(p.wrist[3:], scalar_first=True).apply(normal)[2] for p in sideways]
@@ -63,7 +64,7 @@ def test_handover_anchors_keep_clear_of_the_other_parts(hand_name, knife):
     farthest = others.query(knife.points[blade])[0].max()
     needed = min(RULES.handover.other_part_clearance + tip_radius(hand_name), farthest - 0.01)
     meaning = definition("knife", "Handover", "blade")
-    half = PlannerSettings().max_proposals // 2
+    half = PlannerSettings().proposals.max_proposals // 2
     shaped = FunctionalPlanner(hand_name).propose(knife, "blade", meaning)[: 2 * half : 2]
     plain = FunctionalPlanner(hand_name).propose(knife, "blade")
     gaps = np.concatenate([others.query(anchored(p))[0] for p in shaped])
@@ -85,14 +86,14 @@ def test_hold_proposes_power_grasps_in_turn_with_regular_ones(hand_name, mug):
     proposals = FunctionalPlanner(hand_name, settings).propose(
         mug, "body", definition("mug", "Hold", "body")
     )
-    half = settings.max_proposals // 2
+    half = settings.proposals.max_proposals // 2
     assert [p.kind for p in proposals[: 2 * half]] == ["palm", "row"] * half
     assert all(p.palm_target is not None for p in proposals[: 2 * half : 2])
 
 
 def test_without_intent_awareness_proposals_are_by_part(hand_name, mug):
     meaning = definition("mug", "Liftup", "handle")
-    off = PlannerSettings(intent_aware=False)
+    off = PlannerSettings(intent=IntentSettings(aware=False))
     a = FunctionalPlanner(hand_name, off).propose(mug, "handle", meaning)
     b = FunctionalPlanner(hand_name, off).propose(mug, "handle")
     assert [p.wrist.tolist() for p in a] == [p.wrist.tolist() for p in b]
@@ -128,7 +129,10 @@ def _fake(monkeypatch, intent_ok, holds) -> None:
 
 def test_candidates_meeting_the_intent_are_validated_first(monkeypatch, mug):
     _fake(monkeypatch, intent_ok=lambda r: r >= 2, holds=lambda r: True)
-    settings = PlannerSettings(solve_batch=4, max_proposals=8, sweep_after=None)
+    settings = PlannerSettings(
+        schedule=ScheduleSettings(solve_batch=4, sweep_after=None),
+        proposals=ProposalSettings(max_proposals=8),
+    )
     result = FunctionalPlanner("allegro", settings).plan(mug, "Liftup a mug by handle")
     assert result.success and result.intent_ok
     assert result.best.rank == 2 and result.best.order == 0
@@ -138,7 +142,10 @@ def test_an_off_intent_grasp_is_returned_with_a_note_when_nothing_else_holds(mon
     # only rank 0 holds, and it misses the intent; the intent-meeting ones slip
     _fake(monkeypatch, intent_ok=lambda r: r != 0, holds=lambda r: r == 0)
     settings = PlannerSettings(
-        solve_batch=4, max_proposals=8, max_candidates=8, sweep_after=None, intent_first=2
+        schedule=ScheduleSettings(
+            solve_batch=4, max_candidates=8, sweep_after=None, intent_first=2
+        ),
+        proposals=ProposalSettings(max_proposals=8),
     )
     result = FunctionalPlanner("allegro", settings).plan(mug, "Liftup a mug by handle")
     assert result.success and result.best.rank == 0 and result.intent_ok is False

@@ -9,7 +9,7 @@ from scipy.spatial.transform import Rotation
 from learned.joint_fit import JointFitError, fit_configuration
 from models.errors import PlanningError
 from models.hands import available_hands, load_hand
-from planner.settings import PlannerSettings
+from planner.settings import LearnedSettings, PlannerSettings
 
 
 @pytest.mark.parametrize("hand_name", available_hands())
@@ -38,7 +38,7 @@ def test_fit_refuses_targets_of_the_wrong_shape():
 
 
 def test_fit_solver_needs_dro_targets():
-    with pytest.raises(PlanningError, match="learned_dro"):
-        PlannerSettings(learned_solver="fit", learned_dro=False)
-    with pytest.raises(PlanningError, match="learned_solver"):
-        PlannerSettings(learned_solver="ik")
+    with pytest.raises(PlanningError, match=r"learned\.dro=True"):
+        PlannerSettings(learned=LearnedSettings(solver="fit", dro=False))
+    with pytest.raises(PlanningError, match=r"unknown learned\.solver"):
+        PlannerSettings(learned=LearnedSettings(solver="ik"))

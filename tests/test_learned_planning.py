@@ -15,6 +15,7 @@ from models.errors import InstructionError, PlanningError
 from models.objects import load_object, make_object
 from planner import plan_grasp
 from planner.functional import FunctionalPlanner, PlannerSettings
+from planner.settings import LearnedSettings, ScheduleSettings
 from tests.tiny_models import TINY_INTERACTION
 
 
@@ -45,7 +46,9 @@ def test_auto_takes_the_model_for_labelled_parsed_input_and_learned_otherwise():
 @pytest.mark.parametrize("hand_name", ["allegro", "leap", "shadow"])
 def test_an_unlabelled_cloud_and_a_sentence_are_planned(hand_name):
     cloud = make_object("mug", 3).sample_cloud(4096).points
-    settings = PlannerSettings(learned_samples=4, max_candidates=2)
+    settings = PlannerSettings(
+        schedule=ScheduleSettings(max_candidates=2), learned=LearnedSettings(samples=4)
+    )
     result = plan_grasp(cloud, "hold the mug around its body", hand_name, settings)
     assert result.proposer == "learned"
     assert result.understood["understood_as"] == "Hold a mug by body"
@@ -72,7 +75,11 @@ def test_the_direct_ablation_validates_its_samples_as_drawn(hand_name, monkeypat
     stand_in = interaction.InteractionModel.new(config, seed=0)
     monkeypatch.setitem(interaction._loaded, f"None:{interaction.DIRECT_NAME}", stand_in)
     cloud = make_object("mug", 3).sample_cloud(2048).points
-    settings = PlannerSettings(proposer="direct", learned_samples=3, max_candidates=2)
+    settings = PlannerSettings(
+        proposer="direct",
+        schedule=ScheduleSettings(max_candidates=2),
+        learned=LearnedSettings(samples=3),
+    )
     result = plan_grasp(cloud, "Use a mug by handle", hand_name, settings)
     assert result.proposer == "direct" and len(result.candidates) == 3
     hand = FunctionalPlanner(hand_name).hand
@@ -97,7 +104,9 @@ def test_learned_proposals_hold_a_mug_by_its_body():
 @pytest.mark.slow
 def test_without_dro_the_program_gets_wrist_and_anchors_only():
     cloud = make_object("mug", 3).sample_cloud(4096).points
-    settings = PlannerSettings(learned_samples=2, max_candidates=1, learned_dro=False)
+    settings = PlannerSettings(
+        schedule=ScheduleSettings(max_candidates=1), learned=LearnedSettings(samples=2, dro=False)
+    )
     result = plan_grasp(cloud, "hold the mug around its body", "allegro", settings)
     assert all(c.proposal.point_index is None for c in result.candidates)
     assert "dro" not in result.stage_times()
@@ -108,7 +117,10 @@ def test_without_drake_the_joints_are_fitted_to_dro_targets():
     """The ablation without Drake: every candidate comes from the joint fit, unconstrained,
     and goes to validation however deep it is in the object."""
     cloud = make_object("mug", 3).sample_cloud(4096).points
-    settings = PlannerSettings(learned_samples=2, max_candidates=1, learned_solver="fit")
+    settings = PlannerSettings(
+        schedule=ScheduleSettings(max_candidates=1),
+        learned=LearnedSettings(samples=2, solver="fit"),
+    )
     result = plan_grasp(cloud, "hold the mug around its body", "allegro", settings)
     assert result.candidates
     for cand in result.candidates:

@@ -22,6 +22,7 @@ from models.objects import load_object, make_object
 from planner import plan_grasp
 from planner.functional import FunctionalPlanner, HandGeometry, PlannerSettings
 from planner.labels import voted_part
+from planner.settings import IntentSettings, ProposalSettings, ScheduleSettings, with_overrides
 
 
 def test_planned_mug_grasp_holds_and_touches_the_body(hand_name):
@@ -48,14 +49,12 @@ def test_moved_grasp_no_longer_holds():
 def test_validate_all_keeps_every_holding_candidate():
     from dataclasses import replace
 
-    from planner.functional import PlannerSettings
-
     obj = make_object("mug", 3)
-    settings = PlannerSettings(max_candidates=4)
+    settings = PlannerSettings(schedule=ScheduleSettings(max_candidates=4))
     first = FunctionalPlanner("allegro", settings).plan(obj, "Hold a mug by body")
-    every = FunctionalPlanner("allegro", replace(settings, validate_all=True)).plan(
-        obj, "Hold a mug by body"
-    )
+    every = FunctionalPlanner(
+        "allegro", replace(settings, schedule=replace(settings.schedule, validate_all=True))
+    ).plan(obj, "Hold a mug by body")
     assert first.success and every.success
     assert every.best.rank == first.best.rank  # the same grasp is returned
     validated = [c for c in every.candidates if c.order is not None]
@@ -68,11 +67,44 @@ def test_validate_all_keeps_every_holding_candidate():
 def test_benchmark_setting_overrides():
     from eval.planner_benchmark import planner_settings
 
-    s = planner_settings(4, ["program.major_iterations=60", "use_palm=False", "min_quality=0.01"])
-    assert s.max_candidates == 4 and s.program.major_iterations == 60
-    assert s.use_palm is False and s.min_quality == 0.01
-    with pytest.raises(SystemExit, match="FIELD=VALUE"):
+    s = planner_settings(
+        4, ["program.major_iterations=60", "proposals.use_palm=False", "schedule.min_quality=0.01"]
+    )
+    assert s.schedule.max_candidates == 4 and s.program.major_iterations == 60
+    assert s.proposals.use_palm is False and s.schedule.min_quality == 0.01
+    with pytest.raises(SystemExit, match="unknown planner setting 'colour'.*schedule.solve_batch"):
         planner_settings(4, ["colour=red"])
+    with pytest.raises(SystemExit, match="did you mean 'intent.aware'"):
+        planner_settings(4, ["intent_aware=False"])
+
+
+def test_settings_overrides_by_dotted_key():
+    from planner.settings import LearnedSettings, setting_keys, with_overrides
+
+    base = PlannerSettings(learned=LearnedSettings(dro=False))
+    s = with_overrides(
+        base,
+        {
+            "protocol": "dexgraspbench",
+            "schedule.solve_batch": 4,
+            "intent.aware": False,
+            "learned.solver": "fit",  # needs learned.dro, set with it: one replace per group
+            "learned.dro": True,
+            "program.major_iterations": 60,
+        },
+    )
+    assert (s.protocol, s.schedule.solve_batch, s.intent.aware) == ("dexgraspbench", 4, False)
+    assert (s.learned.solver, s.learned.dro, s.program.major_iterations) == ("fit", True, 60)
+    assert s.schedule.max_candidates == base.schedule.max_candidates  # the rest unchanged
+    assert with_overrides(base, {}) is base
+    keys = setting_keys()
+    assert "proposer" in keys and "proposals.max_proposals" in keys and "learned" not in keys
+    with pytest.raises(PlanningError, match="did you mean 'schedule.max_candidates'"):
+        with_overrides(base, {"max_candidates": 2})
+    with pytest.raises(PlanningError, match="unknown planner setting 'schedule'"):
+        with_overrides(base, {"schedule": 2})
+    with pytest.raises(PlanningError, match="learned.dro=True"):
+        with_overrides(base, {"learned.solver": "fit"})
 
 
 def test_benchmark_records_every_candidate():
@@ -268,37 +300,45 @@ def test_proposals_are_solved_best_anchor_closure_first(hand_name):
     from planner.quality import contact_quality
 
     obj = make_object("mug", 3)
-    rows_only = PlannerSettings(pinch_proposals=0)  # pinches: their own group, tested below
+    rows_only = PlannerSettings(
+        proposals=ProposalSettings(pinch_proposals=0)
+    )  # pinches: their own group, tested below
     proposals = FunctionalPlanner(hand_name, rows_only).propose(obj, "handle")
     qualities = [p.anchor_quality for p in proposals]
     assert qualities == sorted(qualities, reverse=True)
     best = proposals[0]
     expected = contact_quality(best.anchors, -best.normals, obj.points.mean(axis=0)).epsilon
     assert best.anchor_quality == pytest.approx(expected)
-    clearance = dataclasses.replace(rows_only, proposal_order="clearance")
+    clearance = dataclasses.replace(
+        rows_only, proposals=dataclasses.replace(rows_only.proposals, proposal_order="clearance")
+    )
     earlier = FunctionalPlanner(hand_name, clearance)
     scores = [p.score for p in earlier.propose(obj, "handle")]
     assert scores == sorted(scores, reverse=True)
     with pytest.raises(PlanningError, match="proposal_order"):
-        PlannerSettings(proposal_order="random")
+        PlannerSettings(proposals=ProposalSettings(proposal_order="random"))
 
 
 def test_proposals_are_solved_a_batch_at_a_time():
     obj = make_object("bottle", 1)
     for batch in (1, 2, 4):
-        planner = FunctionalPlanner("allegro", PlannerSettings(solve_batch=batch))
+        planner = FunctionalPlanner(
+            "allegro", PlannerSettings(schedule=ScheduleSettings(solve_batch=batch))
+        )
         result = planner.plan(obj, "Hold a bottle by body")
         assert result.success
         solved = len(result.candidates)
         # the solved ones are validated before the next batch is solved, so planning ends
         # with the batch whose candidate held
-        assert solved % batch == 0 or solved == planner.settings.max_proposals
+        assert solved % batch == 0 or solved == planner.settings.proposals.max_proposals
         assert result.best.rank // batch == (solved - 1) // batch
 
 
 def test_a_plan_without_a_grasp_chooses_no_candidate():
     # LEAP's first validated proposal on this mug's handle slips; the second is solved only
-    settings = PlannerSettings(max_proposals=2, max_candidates=1)
+    settings = PlannerSettings(
+        schedule=ScheduleSettings(max_candidates=1), proposals=ProposalSettings(max_proposals=2)
+    )
     result = FunctionalPlanner("leap", settings).plan(make_object("mug", 3), "Use a mug by handle")
     assert result.grasp is None and not result.success
     assert any(c.grasp is None and c.order is None for c in result.candidates)
@@ -332,7 +372,9 @@ def test_weak_candidates_wait_only_for_the_first_solves(monkeypatch):
     for gate, solves in ((6, 6), (4, 4), (99, 16)):
         # the gate alone: no sweep after the failed validations of proposals 0-2
         settings = PlannerSettings(
-            gate_solves=gate, solve_batch=2, max_proposals=16, sweep_after=None, intent_aware=False
+            schedule=ScheduleSettings(gate_solves=gate, solve_batch=2, sweep_after=None),
+            proposals=ProposalSettings(max_proposals=16),
+            intent=IntentSettings(aware=False),
         )
         result = FunctionalPlanner("allegro", settings).plan(obj, "Hold a bottle by body")
         assert result.success and result.best.rank == 3
@@ -346,17 +388,19 @@ def test_after_failed_validations_the_rest_are_solved_and_the_best_validated(mon
     # strong closure everywhere; the later proposals have the better task metric
     _fake_solves_and_verdicts(monkeypatch, 0.5, lambda rank: rank / 100, holder=12)
     obj = make_object("bottle", 1)
-    base = {"solve_batch": 2, "max_proposals": 16, "max_candidates": 8, "intent_aware": False}
-    result = FunctionalPlanner("allegro", PlannerSettings(sweep_after=4, **base)).plan(
-        obj, "Hold a bottle by body"
+    base = PlannerSettings(
+        schedule=ScheduleSettings(solve_batch=2, max_candidates=8),
+        proposals=ProposalSettings(max_proposals=16),
+        intent=IntentSettings(aware=False),
     )
+    sweep = with_overrides(base, {"schedule.sweep_after": 4})
+    result = FunctionalPlanner("allegro", sweep).plan(obj, "Hold a bottle by body")
     validated = sorted((c for c in result.candidates if c.order is not None), key=lambda c: c.order)
     assert [c.rank for c in validated] == [1, 0, 3, 2, 15, 14, 13, 12]
     assert result.success and result.best.rank == 12 and len(result.candidates) == 16
     # batch by batch, the 8 validations end at proposal 7 and nothing holds
-    result = FunctionalPlanner("allegro", PlannerSettings(sweep_after=None, **base)).plan(
-        obj, "Hold a bottle by body"
-    )
+    batches = with_overrides(base, {"schedule.sweep_after": None})
+    result = FunctionalPlanner("allegro", batches).plan(obj, "Hold a bottle by body")
     assert not result.success and len(result.candidates) == 8
 
 
@@ -366,12 +410,9 @@ def test_the_sweep_does_not_wait_for_the_queue_the_gate_released(monkeypatch):
     # weak closure everywhere (held back by the gate); later proposals rank higher
     _fake_solves_and_verdicts(monkeypatch, 0.05, lambda rank: rank / 100, holder=12)
     settings = PlannerSettings(
-        solve_batch=2,
-        max_proposals=16,
-        max_candidates=8,
-        gate_solves=6,
-        sweep_after=4,
-        intent_aware=False,
+        schedule=ScheduleSettings(solve_batch=2, max_candidates=8, gate_solves=6, sweep_after=4),
+        proposals=ProposalSettings(max_proposals=16),
+        intent=IntentSettings(aware=False),
     )
     result = FunctionalPlanner("allegro", settings).plan(
         make_object("bottle", 1), "Hold a bottle by body"
@@ -386,7 +427,7 @@ def test_anchors_keep_off_the_border_with_other_parts(hand_name):
     from scipy.spatial import cKDTree
 
     bowl = make_object("bowl", 6)
-    margin = PlannerSettings().border_margin
+    margin = PlannerSettings().proposals.border_margin
 
     def border_distances(part: str, settings: PlannerSettings) -> np.ndarray:
         others = cKDTree(bowl.points[bowl.point_labels != bowl.part_names.index(part)])
@@ -395,7 +436,12 @@ def test_anchors_keep_off_the_border_with_other_parts(hand_name):
         return np.concatenate([others.query(a)[0] for a in anchored])
 
     # the body's outermost points lie just below the rim; without the margin anchors go there
-    assert border_distances("body", PlannerSettings(border_margin=0.0)).min() < 0.5 * margin
+    assert (
+        border_distances(
+            "body", PlannerSettings(proposals=ProposalSettings(border_margin=0.0))
+        ).min()
+        < 0.5 * margin
+    )
     assert border_distances("body", PlannerSettings()).min() >= margin
     # the rim is narrower than twice the margin: it still gets anchors, at half its widest
     # border distance from the body
@@ -408,7 +454,7 @@ def test_anchors_keep_off_the_border_with_other_parts(hand_name):
 def test_anchors_the_hand_cannot_span_pinch_the_near_edge(hand_name):
     pan = make_object("pan", 3)  # its body is 17-19 cm across
     settings = PlannerSettings()
-    limit = settings.span_factor * HandGeometry(load_hand(hand_name)).span
+    limit = settings.proposals.span_factor * HandGeometry(load_hand(hand_name)).span
 
     def spans(settings: PlannerSettings) -> np.ndarray:
         proposals = FunctionalPlanner(hand_name, settings).propose(pan, "body")
@@ -418,7 +464,7 @@ def test_anchors_the_hand_cannot_span_pinch_the_near_edge(hand_name):
         )
 
     # planned from the part's extremes alone, the thumb sits across the whole pan
-    assert spans(PlannerSettings(span_factor=np.inf)).min() > limit
+    assert spans(PlannerSettings(proposals=ProposalSettings(span_factor=np.inf))).min() > limit
     # now it presses back straight across the wall or floor from the fingers, except where
     # no surface lies across within a centimetre of the fingers
     assert (spans(settings) <= limit).sum() >= 12
@@ -432,7 +478,9 @@ def test_palm_on_thin_parts_follows_the_hand_file(hand_name):
     # a bottle's body is wider than a fingertip: the palm target stays
     assert all(p.palm_target is not None for p in planner.propose(bottle, "body"))
     for setting in (True, False):  # the planner setting overrides the hand file
-        override = FunctionalPlanner(hand_name, PlannerSettings(palm_on_thin_parts=setting))
+        override = FunctionalPlanner(
+            hand_name, PlannerSettings(proposals=ProposalSettings(palm_on_thin_parts=setting))
+        )
         assert all((p.palm_target is not None) == setting for p in override.propose(pen, "barrel"))
 
 
@@ -450,10 +498,12 @@ def test_a_hand_file_can_keep_the_palm_off_thin_parts(tmp_path):
 
 def test_pinch_proposals_follow_the_regular_ones(hand_name):
     obj = make_object("lotion_pump", 13)  # a pump head narrower than LEAP's fingertip row
-    planner = FunctionalPlanner(hand_name, PlannerSettings(pinch_proposals=4))
+    planner = FunctionalPlanner(
+        hand_name, PlannerSettings(proposals=ProposalSettings(pinch_proposals=4))
+    )
     proposals = planner.propose(obj, "pump")
     kinds = [p.kind for p in proposals]
-    rows = planner.settings.max_proposals
+    rows = planner.settings.proposals.max_proposals
     assert kinds == ["row"] * rows + ["pinch"] * 4
     free = len(planner.hand.meta.anchor_fingers) - 3  # thumb and two fingers on the part
     for p in proposals[rows:]:
@@ -468,13 +518,14 @@ def test_pinch_proposals_follow_the_regular_ones(hand_name):
     default = FunctionalPlanner(hand_name).propose(obj, "pump")
     assert sum(p.kind == "pinch" for p in default) == planner.hand.meta.pinch_proposals
     with pytest.raises(PlanningError, match="pinch_proposals"):
-        PlannerSettings(pinch_proposals=-1)
+        PlannerSettings(proposals=ProposalSettings(pinch_proposals=-1))
 
 
 def test_a_planned_pinch_leaves_its_free_finger_out_of_the_anchor_error(hand_name):
     obj = make_object("lotion_pump", 13)
     settings = PlannerSettings(
-        max_proposals=0, pinch_proposals=2, max_candidates=2, validate_all=True
+        schedule=ScheduleSettings(max_candidates=2, validate_all=True),
+        proposals=ProposalSettings(max_proposals=0, pinch_proposals=2),
     )
     result = FunctionalPlanner(hand_name, settings).plan(obj, "Use a lotion pump by pump")
     assert [c.proposal.kind for c in result.candidates] == ["pinch", "pinch"]
@@ -489,22 +540,30 @@ def test_a_planned_pinch_leaves_its_free_finger_out_of_the_anchor_error(hand_nam
 
 
 def test_plan_grasp_refuses_bad_settings_before_planning():
-    """A zero approach step divided by zero, a tiny one asked for terabytes and solve_batch=0
-    never ended: `from planner import plan_grasp` checks its settings first."""
+    """A zero approach step divided by zero, a tiny one asked for terabytes and
+    schedule.solve_batch=0 never ended: `from planner import plan_grasp` checks its settings
+    first."""
     from planner import plan_grasp as checked
     from planner.api import SettingsError
 
     bottle = make_object("bottle", 1)
-    for kwargs, message in (
-        ({"approach_step_deg": 0}, "approach_step_deg must be between 1 and 360"),
-        ({"approach_step_deg": 1e-9}, "between 1 and 360"),
-        ({"solve_batch": 0}, "solve_batch must be at least 1"),
-        ({"max_candidates": 1.5}, "max_candidates must be a whole number"),
-        ({"span_factor": float("nan")}, "span_factor must be finite"),
-        ({"use_palm": "no"}, "use_palm must be True or False"),
+    for overrides, message in (
+        (
+            {"proposals.approach_step_deg": 0},
+            "proposals.approach_step_deg must be between 1 and 360",
+        ),
+        ({"proposals.approach_step_deg": 1e-9}, "between 1 and 360"),
+        ({"schedule.solve_batch": 0}, "settings.schedule.solve_batch must be at least 1"),
+        ({"schedule.max_candidates": 1.5}, "schedule.max_candidates must be a whole number"),
+        ({"proposals.span_factor": float("nan")}, "proposals.span_factor must be finite"),
+        ({"proposals.use_palm": "no"}, "proposals.use_palm must be True or False"),
+        ({"learned.samples": 0}, "settings.learned.samples must be at least 1"),
     ):
+        settings = with_overrides(PlannerSettings(), overrides)
         with pytest.raises(SettingsError, match=message):
-            checked(bottle, "Hold a bottle by body", "allegro", PlannerSettings(**kwargs))
+            checked(bottle, "Hold a bottle by body", "allegro", settings)
+    with pytest.raises(SettingsError, match="settings.schedule must be a ScheduleSettings"):
+        checked(bottle, "Hold a bottle by body", "allegro", PlannerSettings(schedule=8))
     with pytest.raises(DrograspError, match="unknown protocol preset"):
         checked(bottle, "Hold a bottle by body", "allegro", PlannerSettings(protocol="nosuch"))
     with pytest.raises(DrograspError, match="hand must be"):

@@ -9,6 +9,7 @@ from eval.planner_benchmark import PairRecord
 from eval.replay import RecordsError, load_records, replay_pair, with_retry
 from models.objects import make_object
 from planner.functional import FunctionalPlanner, PlannerSettings
+from planner.settings import ProposalSettings, ScheduleSettings
 
 TEXT = "Use a mug by handle"
 
@@ -34,10 +35,15 @@ def _record(result, part: str) -> PairRecord:
 def test_replay_of_all_validated_records_is_the_plan(hand_name, tmp_path):
     # a small policy whose sweep after 2 failed validations is reached on this handle (here: by
     # every hand, which then solves all 8 proposals; no candidate waits for the gate)
-    small = PlannerSettings(max_proposals=8, max_candidates=4, sweep_after=2, min_quality=0.0)
+    small = PlannerSettings(
+        schedule=ScheduleSettings(max_candidates=4, sweep_after=2, min_quality=0.0),
+        proposals=ProposalSettings(max_proposals=8),
+    )
     obj = make_object("mug", 3)
     planned = FunctionalPlanner(hand_name, small).plan(obj, TEXT)
-    everything = replace(small, max_candidates=32, validate_all=True)  # every solved one
+    everything = replace(
+        small, schedule=replace(small.schedule, max_candidates=32, validate_all=True)
+    )  # every solved one
     recorded = FunctionalPlanner(hand_name, everything).plan(obj, TEXT)
     path = tmp_path / "records.jsonl"
     path.write_text(json.dumps(asdict(_record(recorded, "handle"))) + "\n")
@@ -73,11 +79,17 @@ def test_records_without_every_verdict_are_refused(tmp_path):
     record = PairRecord("leap", "mug", 3, TEXT, "handle", False, False, False, False, 1, [], 0.0)
     record.candidate_summaries = [summary]
     with pytest.raises(RecordsError, match="validate_all"):
-        replay_pair(record, PlannerSettings(max_proposals=1, pinch_proposals=0))
+        replay_pair(
+            record, PlannerSettings(proposals=ProposalSettings(max_proposals=1, pinch_proposals=0))
+        )
     with pytest.raises(RecordsError, match="max_proposals"):
-        replay_pair(record, PlannerSettings(max_proposals=2, pinch_proposals=0))
+        replay_pair(
+            record, PlannerSettings(proposals=ProposalSettings(max_proposals=2, pinch_proposals=0))
+        )
     with pytest.raises(RecordsError, match="pinch_proposals"):
-        replay_pair(record, PlannerSettings(max_proposals=1, pinch_proposals=1))
+        replay_pair(
+            record, PlannerSettings(proposals=ProposalSettings(max_proposals=1, pinch_proposals=1))
+        )
     path = tmp_path / "broken.jsonl"
     path.write_text("{not json\n")
     with pytest.raises(RecordsError, match="cannot read"):
@@ -100,7 +112,10 @@ def _summary(rank: int, success: bool, part: str | None = "handle", task: float 
 def test_a_squeeze_retry_holds_where_the_deeper_squeeze_held():
     """with_retry: a slip is judged by the deeper squeeze's verdict and costs its validation;
     a hold stays as it is, and records that differ in more than the squeeze are refused."""
-    settings = PlannerSettings(max_proposals=3, max_candidates=3, pinch_proposals=0)
+    settings = PlannerSettings(
+        schedule=ScheduleSettings(max_candidates=3),
+        proposals=ProposalSettings(max_proposals=3, pinch_proposals=0),
+    )
     base = PairRecord("leap", "mug", 3, TEXT, "handle", False, False, False, False, 3, [], 0.0)
     base.candidate_summaries = [_summary(0, False), _summary(1, False), _summary(2, True)]
     deeper = replace(

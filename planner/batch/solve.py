@@ -19,9 +19,9 @@ from models.objects import ObjectModel, parse_instruction
 from planner.batch.jobs import Job
 from planner.batch.transfer import transfer_grasp
 from planner.batch.variants import VariantPlanner
-from planner.functional import PlannerSettings
 from planner.intent import check_intent
 from planner.objectref import resolve_object
+from planner.settings import PlannerSettings, ScheduleSettings
 
 NONDETERMINISTIC_KEYS = ("wall_time",)  # measured, not computed: moved into `times`
 
@@ -67,7 +67,8 @@ def cached_planner(
     hand: str, max_candidates: int, protocol: str, variant: int, validate_all: bool
 ) -> VariantPlanner:
     settings = PlannerSettings(
-        max_candidates=max_candidates, protocol=protocol, validate_all=validate_all
+        protocol=protocol,
+        schedule=ScheduleSettings(max_candidates=max_candidates, validate_all=validate_all),
     )
     return VariantPlanner(hand, settings, variant)
 

@@ -31,7 +31,11 @@ class VariantPlanner(FunctionalPlanner):
         super().__init__(hand, settings)
         self.variant = int(variant)
         self._ranker = FunctionalPlanner(
-            self.hand, replace(self.settings, max_proposals=ALL_PROPOSALS)
+            self.hand,
+            replace(
+                self.settings,
+                proposals=replace(self.settings.proposals, max_proposals=ALL_PROPOSALS),
+            ),
         )
         self._count = 0
 
@@ -41,7 +45,7 @@ class VariantPlanner(FunctionalPlanner):
         ranked = self._ranker.propose(obj, part, intent)
         self._count = len(ranked)
         k = self.offset % max(len(ranked), 1)
-        return (ranked[k:] + ranked[:k])[: self.settings.max_candidates]
+        return (ranked[k:] + ranked[:k])[: self.settings.schedule.max_candidates]
 
     def proposal_index(self, rank: int) -> int:
         """Position in the full ranking of the candidate tried `rank`-th (after `propose`)."""
@@ -49,4 +53,4 @@ class VariantPlanner(FunctionalPlanner):
 
     @property
     def offset(self) -> int:
-        return self.variant * self.settings.max_candidates
+        return self.variant * self.settings.schedule.max_candidates

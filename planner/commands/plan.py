@@ -162,15 +162,16 @@ def run(args: argparse.Namespace) -> int:
     out = output_file(args.out, GRASP_SUFFIXES, "--out grasp file") if args.out else None
 
     from planner.api import check_settings
-    from planner.functional import FunctionalPlanner, PlannerSettings
+    from planner.functional import FunctionalPlanner
     from planner.objectref import object_ref
+    from planner.settings import LearnedSettings, PlannerSettings, ScheduleSettings
 
     settings = check_settings(
         PlannerSettings(
-            max_candidates=args.candidates,
-            protocol=args.preset,
             proposer=args.proposer,
-            learned_samples=args.samples,
+            protocol=args.preset,
+            schedule=ScheduleSettings(max_candidates=args.candidates),
+            learned=LearnedSettings(samples=args.samples),
         )
     )
     obj = object_from_args(args)
