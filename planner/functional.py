@@ -22,10 +22,10 @@ from models.errors import InstructionError, PlanningError
 from models.grasp import Grasp
 from models.hands import HandModel, load_hand
 from models.objects import Instruction, ObjectModel, parse_instruction
-from models.objects.intents import Definition
+from models.objects.intents import WRIST_CRITERIA, Definition, label_free
 from models.reproducible import rounded
 from planner.grasp_program import GraspProgram, GraspTargets, SolveResult, grasp_program
-from planner.intent import check_configuration, intent_definition
+from planner.intent import check_configuration, faces_intent, intent_definition
 from planner.labels import grasp_part
 from planner.learned_proposer import (
     anchor_closure,
@@ -131,10 +131,13 @@ class FunctionalPlanner:
 
     def _plan_learned(self, obj: ObjectModel, text: str, direct: bool = False) -> PlanResult:
         """Plan on the learned stages' proposals. The sentence is read as the nearest table
-        instruction (learned.understand); its part is what the grasp must touch, and its
-        intent is checked, only where the object has part labels that name that part: on an
-        unlabelled cloud a grasp that holds is success. `direct`: the direct-diffusion
-        ablation's samples, validated as drawn."""
+        instruction (learned.understand); its part is what the grasp must touch only where the
+        object has part labels that name that part: on an unlabelled cloud a grasp that holds
+        is success. Its intent is checked there too, and on any cloud where the definition
+        needs no labels (Liftup): samples whose drawn wrist meets the criteria the wrist
+        decides (palm down, above the centre of mass) are solved first, with the intent's
+        program (Liftup's table), as the model-based proposer's shaped proposals are.
+        `direct`: the direct-diffusion ablation's samples, validated as drawn."""
         from learned.understand import understand
 
         s = self.settings
@@ -143,10 +146,15 @@ class FunctionalPlanner:
         instruction = understood.instruction
         known = obj.labelled and instruction.part in obj.part_names
         part = instruction.part if known else None
+        checked = s.intent.aware and (known or label_free(instruction.intent))
+        meaning = intent_definition(obj, instruction) if checked else None
+        # samples drawn facing the intent go first (where the wrist decides some criteria)
+        facing = meaning is not None and bool(WRIST_CRITERIA & set(meaning.criteria))
         program = grasp_program(self.hand, obj.collision_pieces(), s.program)
-        build = time.perf_counter() - start
         draw = direct_proposals if direct else learned_proposals
+        t0 = time.perf_counter()
         drawn = draw(obj, text, self.hand, s.learned.samples, s.learned.seed, s.learned.guidance)
+        drawn_time = time.perf_counter() - t0
         proposals = []
         for i in range(len(drawn.wrists)):
             wrist, anchors = rounded(drawn.wrists[i]), rounded(drawn.anchors[i])
@@ -177,17 +185,26 @@ class FunctionalPlanner:
                     anchor_quality=anchor_closure(drawn.anchors[i], drawn.normals[i], obj),
                     kind="direct" if direct else "learned",
                     pending_targets=pending,
+                    # direct samples are not solved: the intent's program would only add its
+                    # table to their measured distance
+                    shaped=facing
+                    and not direct
+                    and faces_intent(wrist, obj, self.hand, instruction),
                 )
             )
-        proposals.sort(key=lambda p: -p.anchor_quality)  # stable: sample order breaks ties
-        times = {"build": build, **drawn.times}
+        # facing samples first, then best anchor closure; stable: sample order breaks ties
+        proposals.sort(key=lambda p: (not p.shaped, -p.anchor_quality))
+        shaped_program, table_top = program, None
+        if any(p.shaped for p in proposals):
+            shaped_program, table_top = self._intent_program(obj, meaning)
+        times = {"build": time.perf_counter() - start - drawn_time, **drawn.times}
         result = self._run(
             obj,
             instruction,
             part,
-            known and s.intent.aware,
+            checked,
             proposals,
-            (program, program, None),
+            (program, shaped_program, table_top),
             times,
         )
         result.understood = understood.to_dict()
@@ -236,7 +253,8 @@ class FunctionalPlanner:
             chosen = scheduled.on_part
             if scheduled.found is None:
                 notes.append(
-                    f"no holding grasp on the {part} met the {instruction.intent} definition; "
+                    f"no holding grasp on the {part or 'object'} met the {instruction.intent} "
+                    "definition; "
                     f"returning one that does not ({chosen.intent.reason})"
                 )
             return PlanResult(instruction, self.hand.name, chosen.grasp, candidates, notes)

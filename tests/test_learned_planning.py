@@ -102,6 +102,35 @@ def test_learned_proposals_hold_a_mug_by_its_body():
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("hand_name", ["allegro", "leap", "shadow"])
+def test_liftup_is_checked_on_a_bare_cloud_and_samples_facing_down_go_first(hand_name):
+    """Liftup needs no part labels: on a bare cloud every solved sample is checked, and the
+    samples drawn palm down above the centre of mass are solved first, above a table."""
+    from planner.intent import faces_intent
+
+    cloud = load_object(make_object("pan", 3).sample_cloud(4096).points)
+    planner = FunctionalPlanner(
+        hand_name,
+        PlannerSettings(
+            schedule=ScheduleSettings(max_candidates=1), learned=LearnedSettings(samples=8)
+        ),
+    )
+    # only solve: proposals and their order are what is tested here
+    planner._validate = lambda program, obj, instruction, cand: None
+    result = planner.plan(cloud, "lift up the pan by its handle")
+    assert result.instruction.intent == "Liftup"
+    shaped = [c.proposal.shaped for c in sorted(result.candidates, key=lambda c: c.rank)]
+    assert any(shaped) and shaped == sorted(shaped, reverse=True)
+    for c in result.candidates:
+        wrist = c.proposal.wrist
+        assert c.proposal.shaped == faces_intent(wrist, cloud, planner.hand, result.instruction)
+        if c.solve.ok:
+            assert c.intent is not None and c.intent.intent == "Liftup"
+            if c.proposal.shaped:  # solved above the table
+                assert c.intent["above_table"].value >= -1e-3
+
+
+@pytest.mark.slow
 def test_without_dro_the_program_gets_wrist_and_anchors_only():
     cloud = make_object("mug", 3).sample_cloud(4096).points
     settings = PlannerSettings(

@@ -188,6 +188,14 @@ def test_cli_plan_reports_no_grasp_with_nonzero_exit():
     assert "spout" in run.stderr and "Traceback" not in run.stderr
 
 
+def test_cli_plan_refuses_an_unknown_setting_naming_the_valid_ones():
+    run = _cli(
+        "plan", "--object", "mug", "--text", "Use a mug by handle", "--set", "schedule.bogus=3"
+    )
+    assert run.returncode == 2 and "Traceback" not in run.stderr
+    assert "schedule.bogus" in run.stderr and "schedule.max_candidates" in run.stderr
+
+
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 
 

@@ -103,6 +103,14 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=16,
         help="samples the learned (or direct) proposer draws (default 16)",
     )
+    p.add_argument(
+        "--set",
+        nargs="+",
+        default=[],
+        metavar="KEY=VALUE",
+        help="any planner setting by its dotted key (planner.settings.with_overrides), e.g. "
+        "--set schedule.solve_batch=4 intent.aware=false learned.seed=1",
+    )
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.set_defaults(func=run)
 
@@ -162,18 +170,18 @@ def run(args: argparse.Namespace) -> int:
     out = output_file(args.out, GRASP_SUFFIXES, "--out grasp file") if args.out else None
 
     from planner.api import check_settings
+    from planner.commands.validate import parse_overrides
     from planner.functional import FunctionalPlanner
     from planner.objectref import object_ref
-    from planner.settings import LearnedSettings, PlannerSettings, ScheduleSettings
+    from planner.settings import LearnedSettings, PlannerSettings, ScheduleSettings, with_overrides
 
-    settings = check_settings(
-        PlannerSettings(
-            proposer=args.proposer,
-            protocol=args.preset,
-            schedule=ScheduleSettings(max_candidates=args.candidates),
-            learned=LearnedSettings(samples=args.samples),
-        )
+    settings = PlannerSettings(
+        proposer=args.proposer,
+        protocol=args.preset,
+        schedule=ScheduleSettings(max_candidates=args.candidates),
+        learned=LearnedSettings(samples=args.samples),
     )
+    settings = check_settings(with_overrides(settings, parse_overrides(args.set)))
     obj = object_from_args(args)
     planner = FunctionalPlanner(args.hand, settings)
     chosen = planner.proposer_for(obj, args.text)
