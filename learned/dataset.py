@@ -26,6 +26,7 @@ import torch
 from torch.utils.data import Dataset
 
 from models.errors import DrograspError
+from models.objects.names import INTENTS
 
 FORMAT = "drograsp-grasps/3"
 # formats this code reads: /2 has no intent_ok column (read as -1, unknown)
@@ -60,9 +61,13 @@ ARRAYS: dict[str, tuple[str, tuple]] = {
     "metrics": ("float32", (len(METRICS),)),
     # the grasp meets its intent's definition (planner.intent): 1 yes, 0 no, -1 not checked
     "intent_ok": ("int8", ()),
+    # every intent the grasp meets on its part, columns as models.objects.INTENTS: 1 yes, 0 no,
+    # -1 not asked of this part by the table or not checked. Kept beside the blocks
+    # (intents/NAME.npz, `drograsp dataset check-intents`), not in them.
+    "intents_met": ("int8", (len(INTENTS),)),
 }
-# columns that older formats lack, and the value their rows read as
-ADDED_COLUMNS: dict[str, int] = {"intent_ok": -1}
+# columns that older formats (or a block without its intents file) lack, and their fill
+ADDED_COLUMNS: dict[str, int] = {"intent_ok": -1, "intents_met": -1}
 
 
 class DatasetError(DrograspError, ValueError):
@@ -113,6 +118,11 @@ def block_path(root: str | Path, name: str) -> Path:
     return Path(root) / "blocks" / f"{name}.npz"
 
 
+def intents_path(root: str | Path, name: str) -> Path:
+    """A block's `intents_met` verdicts (planner.batch.intents)."""
+    return Path(root) / "intents" / f"{name}.npz"
+
+
 def _read_block(root: str | Path, name: str, dof: int) -> dict[str, np.ndarray]:
     path = block_path(root, name)
     if not path.is_file():
@@ -128,7 +138,20 @@ def _read_block(root: str | Path, name: str, dof: int) -> dict[str, np.ndarray]:
     n = len(arrays.get("hand", ()))
     for key, fill in ADDED_COLUMNS.items():
         if key not in arrays:
-            arrays[key] = np.full(n, fill, dtype=ARRAYS[key][0])
+            dtype, shape = ARRAYS[key]
+            arrays[key] = np.full((n, *shape), fill, dtype=dtype)
+    side = intents_path(root, name)
+    if side.is_file():  # verdicts made for this block as it is now (else left unchecked)
+        try:
+            with np.load(side, allow_pickle=False) as npz:
+                met = npz["intents_met"]
+        except (ValueError, OSError, EOFError, KeyError, zipfile.BadZipFile) as err:
+            raise DatasetError(
+                f"{side} is damaged ({type(err).__name__}: {err}); delete it and run "
+                "`drograsp dataset check-intents` again"
+            ) from None
+        if met.shape == arrays["intents_met"].shape:
+            arrays["intents_met"] = met
     missing = set(ARRAYS) - set(arrays)
     if missing:
         raise DatasetError(f"{path} lacks arrays {sorted(missing)}")

@@ -38,6 +38,7 @@ from learned.interaction import (
 from learned.paraphrase import generic_paraphrases, request_of, train_paraphrases
 from learned.pointnet import grouping
 from learned.weights import WEIGHTS_DIR, load_weights, save_weights
+from models.objects import INTENTS, instruction_text
 
 CHECKPOINT = "checkpoint"
 MAX_TILT = math.radians(30.0)
@@ -69,6 +70,10 @@ class TrainSettings:
     # learn also from grasps that hold on the instructed part but miss their intent's
     # definition (intent_ok 0): three times the rows of dataset v2, intent taught less cleanly
     all_rows: bool = False
+    # learn each grasp under every intent it meets on its part (the dataset's `intents_met`,
+    # `drograsp dataset check-intents`), not only the one it was planned for; a grasp meeting
+    # none is learned (under its own instruction) only with `all_rows`
+    relabel: bool = False
     samples_per_object: int = 4  # cached 2048-point samples per object
     checkpoint_minutes: float = 3.0
     threads: int = 1
@@ -151,6 +156,41 @@ def usable_rows(data: GraspArrays, all_rows: bool = False) -> np.ndarray:
     return np.flatnonzero(np.asarray(ok) != 0)
 
 
+def training_pairs(
+    data: GraspArrays, all_rows: bool = False, relabel: bool = False
+) -> tuple[np.ndarray, list[str]]:
+    """The (row, instruction) pairs to learn from: each usable row under its own instruction
+    (`usable_rows`), or with `relabel` under every instruction of the table whose intent it
+    meets on its part. Rows never checked against the other intents (intents_met all -1)
+    keep their own instruction."""
+    meta, a = data.meta, data.arrays
+    own = [meta["instructions"][i] for i in a["instruction"]]
+    if not relabel:
+        rows = usable_rows(data, all_rows)
+        return rows, [own[r] for r in rows]
+    met = a["intents_met"]
+    if not (met >= 0).any() and len(data):
+        raise DatasetError(
+            "--relabel needs every grasp checked against every intent of its part: run "
+            "`drograsp dataset check-intents DIR` on the dataset first"
+        )
+    usable = set(usable_rows(data, all_rows).tolist())
+    rows, texts = [], []
+    for r in range(len(data)):
+        if (met[r] < 0).all():  # not checked: as without relabel
+            if r in usable:
+                rows.append(r)
+                texts.append(own[r])
+            continue
+        cat, part = meta["categories"][a["category"][r]], meta["parts"][a["part"][r]]
+        meets = [instruction_text(i, cat, part) for k, i in enumerate(INTENTS) if met[r, k] == 1]
+        if not meets and all_rows:
+            meets = [own[r]]
+        rows += [r] * len(meets)
+        texts += meets
+    return np.asarray(rows, dtype=np.int64), texts
+
+
 def random_rotation(rng: np.random.Generator) -> np.ndarray:
     """Any yaw, then a tilt about a random horizontal axis of up to 30 degrees."""
     yaw = Rotation.from_euler("z", rng.uniform(0, 2 * math.pi))
@@ -183,7 +223,10 @@ class Batcher:
         cache: ObjectPoints,
         config: InteractionConfig,
         settings: TrainSettings,
+        instructions: list[str] | None = None,
     ):
+        """`rows` may repeat a row; `instructions`: the text each is learned under (default
+        the row's own, see `training_pairs`)."""
         from learned.text import encode
 
         self.data, self.rows, self.cache = data, rows, cache
@@ -194,7 +237,7 @@ class Batcher:
         self.hands = [meta["hands"][i] for i in a["hand"][rows]]
         self.hand_names = sorted(set(self.hands))
         self.hand_index = np.array([self.hand_names.index(h) for h in self.hands])
-        instr = [meta["instructions"][i] for i in a["instruction"][rows]]
+        instr = instructions or [meta["instructions"][i] for i in a["instruction"][rows]]
         self.instr_names = sorted(set(instr))
         self.instr_index = np.array([self.instr_names.index(t) for t in instr])
         counts = np.bincount(self.instr_index, minlength=len(self.instr_names))
@@ -406,7 +449,7 @@ def train(
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     train_data = load_split(data, "train")
-    rows = usable_rows(train_data, settings.all_rows)
+    rows, texts = training_pairs(train_data, settings.all_rows, settings.relabel)
     if len(rows) == 0:
         raise DatasetError(f"{data}: the train split has no usable rows")
     cache = ObjectPoints(out / "object_points", config.points, settings.samples_per_object)
@@ -414,7 +457,7 @@ def train(
     pyrng = random.Random(settings.seed)
     gen = torch.Generator().manual_seed(settings.seed)
     model = InteractionModel.new(config, settings.seed)
-    batcher = Batcher(train_data, rows, cache, config, settings)
+    batcher = Batcher(train_data, rows, cache, config, settings, texts)
     val_batch = _val_batch(data, cache, config, settings)
 
     opt = torch.optim.AdamW(
@@ -505,6 +548,7 @@ def train(
     final = InteractionModel.new(config, settings.seed)
     target = "" if config.target == "anchors" else f" --target {config.target}"
     target += " --all-rows" if settings.all_rows else ""
+    target += " --relabel" if settings.relabel else ""
     name = config.name
     final.net.load_state_dict(ema)
     names = " ".join(map(str, data)) if not isinstance(data, str | Path) else str(data)

@@ -463,3 +463,36 @@ def test_several_folders_read_as_one_with_each_rows_own_names(tmp_path):
     assert both.arrays["q_grasp"].shape[1] == max(a.arrays["q_grasp"].shape[1], 22)
     assert (both.arrays["intent_ok"][: len(a)] == -1).all()  # the old format has no verdicts
     assert np.isin(both.arrays["intent_ok"][len(a) :], (0, 1)).all()
+
+
+@needs_shipped
+def test_check_intents_writes_every_intent_each_grasp_meets(tmp_path):
+    """`dataset check-intents`: each row is checked against every intent the table asks of
+    its part; its own intent's verdict is its intent_ok, and a second run has nothing to do."""
+    from models.objects import INTENTS, TABLE
+
+    root = _copy_blocks(tmp_path / "ds", ["seeds-00001"])
+    with np.load(root / "blocks" / "seeds-00001.npz") as z:  # 60 rows keep the test quick
+        np.savez(root / "blocks" / "seeds-00001.npz", **{k: z[k][:60] for k in z.files})
+    meta = json.loads((root / "meta.json").read_text())
+    meta["blocks"]["seeds-00001"]["grasps"] = 60
+    (root / "meta.json").write_text(json.dumps(meta))
+    assert (load_split(root, "train").arrays["intents_met"] == -1).all()  # not checked yet
+    assert cli.main(["dataset", "check-intents", str(root)]) == 0
+    assert (root / "intents" / "seeds-00001.npz").is_file()
+    rows = {s: load_split(root, s) for s in ("train", "val", "test", "heldout")}
+    checked = 0
+    for data in rows.values():
+        a, m = data.arrays, data.meta
+        for r in range(len(data)):
+            cat, part = m["categories"][a["category"][r]], m["parts"][a["part"][r]]
+            asked = {i for i, p in TABLE[cat] if p == part}
+            met = a["intents_met"][r]
+            assert [met[k] >= 0 for k in range(len(INTENTS))] == [i in asked for i in INTENTS]
+            own = m["intents"][a["intent"][r]]
+            assert met[INTENTS.index(own)] == a["intent_ok"][r]
+            checked += 1
+    assert checked == 60
+    from planner.batch.intents import pending_blocks
+
+    assert pending_blocks(root) == []

@@ -314,3 +314,49 @@ def test_rows_known_to_miss_their_intent_are_left_out_unless_all_rows() -> None:
     data = GraspArrays("train", {"intent_ok": ok, "hand": np.zeros(5, dtype=int)}, {})
     assert usable_rows(data).tolist() == [0, 2, 4]
     assert usable_rows(data, all_rows=True).tolist() == [0, 1, 2, 3, 4]
+
+
+def test_relabel_learns_each_grasp_under_every_intent_it_meets() -> None:
+    from learned.dataset import DatasetError, GraspArrays
+    from learned.train_interaction import training_pairs
+
+    meta = {
+        "instructions": ["Hold a mug by body", "Liftup a mug by body", "Use a mug by handle"],
+        "categories": ["mug"],
+        "parts": ["body", "handle"],
+    }
+    # columns Use, Hold, Handover, Liftup; -1: not asked of the part (or not checked)
+    met = np.array(
+        [
+            [-1, 1, 1, 1],  # a Hold grasp meeting Hold, Handover and Liftup
+            [-1, 0, 0, 1],  # a Hold grasp meeting only Liftup
+            [-1, 0, 0, 0],  # a Liftup grasp meeting none
+            [-1, -1, -1, -1],  # never checked: its own instruction, as without relabel
+            [1, -1, -1, 0],  # a Use grasp on the handle meeting Use
+        ]
+    )
+    arrays = {
+        "instruction": np.array([0, 0, 1, 1, 2]),
+        "category": np.zeros(5, dtype=int),
+        "part": np.array([0, 0, 0, 0, 1]),
+        "intent_ok": np.array([1, 0, 0, 1, 1]),
+        "intents_met": met,
+        "hand": np.zeros(5, dtype=int),
+    }
+    data = GraspArrays("train", arrays, meta)
+    rows, texts = training_pairs(data, relabel=True)
+    assert list(zip(rows.tolist(), texts, strict=True)) == [
+        (0, "Hold a mug by body"),
+        (0, "Handover a mug by body"),
+        (0, "Liftup a mug by body"),
+        (1, "Liftup a mug by body"),
+        (3, "Liftup a mug by body"),
+        (4, "Use a mug by handle"),
+    ]
+    rows, texts = training_pairs(data, all_rows=True, relabel=True)
+    assert (2, "Liftup a mug by body") in zip(rows.tolist(), texts, strict=True)
+    rows, texts = training_pairs(data)  # without relabel: own instructions, usable rows
+    assert rows.tolist() == [0, 3, 4] and texts[0] == "Hold a mug by body"
+    unchecked = GraspArrays("train", arrays | {"intents_met": np.full((5, 4), -1)}, meta)
+    with pytest.raises(DatasetError, match="check-intents"):
+        training_pairs(unchecked, relabel=True)

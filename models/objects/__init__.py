@@ -24,7 +24,7 @@ _WHERE: dict[str, str] = {
     "contains": "collision",
     "export_object": "generate",
     "make_object": "generate",
-    "INTENTS": "instructions",
+    "INTENTS": "names",
     "PARAPHRASES": "instructions",
     "TABLE": "instructions",
     "Instruction": "instructions",

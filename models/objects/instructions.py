@@ -12,8 +12,8 @@ from dataclasses import dataclass
 
 from ..errors import InstructionError
 from .library import CATEGORIES, category
+from .names import INTENTS
 
-INTENTS: tuple[str, ...] = ("Use", "Hold", "Handover", "Liftup")
 MAX_INSTRUCTION = 300  # characters: an instruction is a short sentence (and parsing stays fast)
 
 TABLE: dict[str, tuple[tuple[str, str], ...]] = {

@@ -1,4 +1,4 @@
-"""Names of the library's categories and splits, importable without the geometry libraries.
+"""Names of the library's categories, splits and intents, importable without the geometry libraries.
 
 The CLI offers these as choices at start-up, which must not wait for trimesh and manifold3d;
 `tests/test_objects_library.py` checks that they equal the library's own.
@@ -24,6 +24,7 @@ CATEGORY_NAMES: tuple[str, ...] = (
 )
 HELDOUT: tuple[str, ...] = ("teapot", "screwdriver")
 SPLITS: tuple[str, ...] = ("train", "val", "test", "heldout")
+INTENTS: tuple[str, ...] = ("Use", "Hold", "Handover", "Liftup")
 
 
 def categories() -> tuple[str, ...]:

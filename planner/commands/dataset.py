@@ -83,6 +83,18 @@ def register(sub: argparse._SubParsersAction) -> None:
     c.add_argument("--out", required=True, metavar="DIR")
     c.set_defaults(func=run_compact)
 
+    k = dsub.add_parser(
+        "check-intents",
+        help="check every grasp against every intent its part is asked for (for --relabel)",
+        description="Writes DIR/intents/BLOCK.npz beside each block: whether each grasp meets "
+        "each intent's definition that the instruction table asks of its part (not only its "
+        "own intent's). `drograsp train interaction --relabel` learns each grasp for every "
+        "intent it meets. Resumes: blocks already checked are skipped.",
+    )
+    k.add_argument("root", metavar="DIR")
+    k.add_argument("--workers", type=positive_int, default=1, help="blocks in parallel")
+    k.set_defaults(func=run_check_intents)
+
     i = dsub.add_parser("info", help="counts per split, hand, category and intent")
     i.add_argument(
         "root",
@@ -156,6 +168,20 @@ def run_compact(args: argparse.Namespace) -> int:
     from planner.batch.dataset import compact
 
     print_info(compact(args.results, args.out, _command()))
+    return 0
+
+
+def run_check_intents(args: argparse.Namespace) -> int:
+    input_folder(args.root, "dataset folder")
+    from tqdm import tqdm
+
+    from learned.dataset import read_meta
+    from planner.batch.intents import check_intents, pending_blocks
+
+    blocks, todo = read_meta(args.root)["blocks"], pending_blocks(args.root)
+    with tqdm(total=len(todo), desc="check-intents", unit="block") as bar:
+        done = check_intents(args.root, args.workers, lambda name, rows: bar.update(1))
+    print(f"checked {len(done)} block(s); {len(blocks) - len(done)} were checked before")
     return 0
 
 

@@ -72,6 +72,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="learn also from grasps that miss their intent's definition (intent_ok 0)",
     )
     i.add_argument(
+        "--relabel",
+        action="store_true",
+        help="learn each grasp under every intent it meets on its part (run `drograsp dataset "
+        "check-intents DIR` first); with --all-rows, grasps meeting none under their own",
+    )
+    i.add_argument(
         "--install",
         action="store_true",
         help="copy the final weights to learned/weights/ (the shipped model)",
@@ -127,6 +133,7 @@ def interaction_setup(args: argparse.Namespace):
         balance=args.balance,
         generic_share=args.generic_share,
         all_rows=args.all_rows,
+        relabel=args.relabel,
     )
     return config, settings
 
