@@ -13,6 +13,7 @@ Written by `planner.batch.dataset` (`drograsp dataset compact|generate`).
 
 from __future__ import annotations
 
+import hashlib
 import json
 import zipfile
 from collections import Counter
@@ -123,6 +124,28 @@ def intents_path(root: str | Path, name: str) -> Path:
     return Path(root) / "intents" / f"{name}.npz"
 
 
+def block_digest(root: str | Path, name: str) -> str:
+    """SHA-256 of a block's file: the intents verdicts name the block they were made for, so a
+    block made again (`dataset refresh`) does not silently keep another block's verdicts."""
+    return hashlib.sha256(block_path(root, name).read_bytes()).hexdigest()
+
+
+def read_intents(root: str | Path, name: str) -> np.ndarray | None:
+    """A block's `intents_met` verdicts, or None where it has none made for it as it is now."""
+    side = intents_path(root, name)
+    if not side.is_file():
+        return None
+    try:
+        with np.load(side, allow_pickle=False) as npz:
+            met, digest = npz["intents_met"], str(npz["block_sha256"])
+    except (ValueError, OSError, EOFError, KeyError, zipfile.BadZipFile) as err:
+        raise DatasetError(
+            f"{side} is damaged ({type(err).__name__}: {err}); delete it and run "
+            "`drograsp dataset check-intents` again"
+        ) from None
+    return met if digest == block_digest(root, name) else None
+
+
 def _read_block(root: str | Path, name: str, dof: int) -> dict[str, np.ndarray]:
     path = block_path(root, name)
     if not path.is_file():
@@ -140,18 +163,9 @@ def _read_block(root: str | Path, name: str, dof: int) -> dict[str, np.ndarray]:
         if key not in arrays:
             dtype, shape = ARRAYS[key]
             arrays[key] = np.full((n, *shape), fill, dtype=dtype)
-    side = intents_path(root, name)
-    if side.is_file():  # verdicts made for this block as it is now (else left unchecked)
-        try:
-            with np.load(side, allow_pickle=False) as npz:
-                met = npz["intents_met"]
-        except (ValueError, OSError, EOFError, KeyError, zipfile.BadZipFile) as err:
-            raise DatasetError(
-                f"{side} is damaged ({type(err).__name__}: {err}); delete it and run "
-                "`drograsp dataset check-intents` again"
-            ) from None
-        if met.shape == arrays["intents_met"].shape:
-            arrays["intents_met"] = met
+    met = read_intents(root, name)  # verdicts made for this block as it is now
+    if met is not None and met.shape == arrays["intents_met"].shape:
+        arrays["intents_met"] = met
     missing = set(ARRAYS) - set(arrays)
     if missing:
         raise DatasetError(f"{path} lacks arrays {sorted(missing)}")

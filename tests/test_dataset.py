@@ -496,3 +496,10 @@ def test_check_intents_writes_every_intent_each_grasp_meets(tmp_path):
     from planner.batch.intents import pending_blocks
 
     assert pending_blocks(root) == []
+    # a block made again (here: one grasp moved) gets no stale verdicts
+    with np.load(root / "blocks" / "seeds-00001.npz") as z:
+        arrays = {k: z[k] for k in z.files}
+    arrays["wrist"][0, 0] += 0.01
+    np.savez(root / "blocks" / "seeds-00001.npz", **arrays)
+    assert pending_blocks(root) == ["seeds-00001"]
+    assert (load_split(root, "train").arrays["intents_met"] == -1).all()

@@ -299,3 +299,6 @@ def _generate_block(
         code=code,
         refreshed=refreshed,
     )
+    from planner.batch.intents import check_intents
+
+    check_intents(out)  # every intent each new grasp meets (and any block made again)

@@ -7,7 +7,8 @@ learn less from grasps that meet none. The verdicts are written beside the block
 per block (`DIR/intents/NAME.npz`, array `intents_met`, rows x the dataset's intents: 1 met,
 0 not, -1 no instruction of the table asks that intent of that part; columns as
 models.objects.INTENTS), so the committed blocks
-stay as they were made and the job resumes block by block.
+stay as they were made and the job resumes block by block; each file names the block's SHA-256,
+so a block made again is checked again. `drograsp dataset generate` checks each block it adds.
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from learned.dataset import intents_path, read_meta
+from learned.dataset import block_digest, intents_path, read_intents, read_meta
 from models.hands import HandModel, load_hand
 from models.objects import INTENTS, TABLE, ObjectModel, instruction_text, make_object
 from planner.intent import check_configuration
@@ -57,24 +58,17 @@ def block_intents(root: str | Path, name: str) -> np.ndarray:
 def _write(root: str, name: str) -> tuple[str, int]:
     path = intents_path(root, name)
     path.parent.mkdir(parents=True, exist_ok=True)
+    digest = block_digest(root, name)
     met = block_intents(root, name)
     tmp = path.with_suffix(".tmp.npz")
-    np.savez_compressed(tmp, intents_met=met)
+    np.savez_compressed(tmp, intents_met=met, block_sha256=np.array(digest))
     os.replace(tmp, path)  # a stopped job leaves no half-written file
     return name, len(met)
 
 
 def pending_blocks(root: str | Path) -> list[str]:
-    """The blocks without verdicts, or whose verdicts were made for another row count."""
-    todo = []
-    for name, block in read_meta(root)["blocks"].items():
-        path = intents_path(root, name)
-        if path.is_file():
-            with np.load(path, allow_pickle=False) as npz:
-                if len(npz["intents_met"]) == block["grasps"]:
-                    continue
-        todo.append(name)
-    return todo
+    """The blocks without verdicts, or whose verdicts were made for another version of them."""
+    return [name for name in read_meta(root)["blocks"] if read_intents(root, name) is None]
 
 
 def check_intents(
