@@ -48,9 +48,11 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from models.errors import DrograspError
 from models.hands import available_hands, load_hand
 from models.objects import ObjectModel, make_object
 from models.objects.views import random_turn, single_view_object, turned
+from planner.commands.validate import parse_overrides
 from planner.functional import FunctionalPlanner
 from planner.intent import check_configuration
 from planner.labels import grasp_part
@@ -134,7 +136,8 @@ def full_object(cat: str, seed: int, turn: bool) -> ObjectModel:
 
 
 def run_task(task: tuple) -> Record:
-    method, hand_name, cat, seed, instruction, text, max_candidates, samples, view, turn = task
+    method, hand_name, cat, seed, instruction, text, max_candidates, samples, view, turn = task[:10]
+    overrides = dict(task[10]) if len(task) > 10 else {}
     part = instruction.rsplit(" by ", 1)[1]
     rec = Record(method, hand_name, cat, seed, instruction, text, part, view, turn)
     key = (method, hand_name)
@@ -143,7 +146,7 @@ def run_task(task: tuple) -> Record:
             schedule=ScheduleSettings(max_candidates=max_candidates),
             learned=LearnedSettings(samples=samples),
         )
-        settings = with_overrides(settings, METHODS[method])
+        settings = with_overrides(settings, {**METHODS[method], **overrides})
         _PLANNERS[key] = FunctionalPlanner(hand_name, settings)
     planner = _PLANNERS[key]
     oracle = METHODS[method]["proposer"] == "model"
@@ -317,6 +320,14 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--turn", action="store_true", help="turn every object (yaw, tilt <= 30 deg)")
     p.add_argument("--candidates", type=int, default=8, help="validations per pair at most")
     p.add_argument("--samples", type=int, default=16, help="learned proposals per pair")
+    p.add_argument(
+        "--set",
+        nargs="+",
+        default=[],
+        metavar="KEY=VALUE",
+        help="planner settings for every method (dotted keys, planner.settings.with_overrides), "
+        "e.g. learned.interaction_weights=runs/interaction to try a training run's weights",
+    )
     p.add_argument("--workers", type=int, default=1)
     p.add_argument("--out", default="runs/benchmark", help="records, summary, table, plot")
     args = p.parse_args(argv)
@@ -339,6 +350,17 @@ def main(argv: list[str] | None = None) -> int:
         args.view,
         args.turn,
     )
+    overrides = parse_overrides(args.set)
+    try:  # an unknown key or a bad value fails here, before any work
+        with_overrides(PlannerSettings(), overrides)
+    except DrograspError as err:
+        raise SystemExit(f"--set: {err}") from None
+    folder = overrides.get("learned.interaction_weights")
+    if folder and not (Path(folder) / "interaction.safetensors").is_file():
+        raise SystemExit(
+            f"--set learned.interaction_weights: no interaction.safetensors in {folder}"
+        )
+    todo_all = [(*t, tuple(overrides.items())) for t in todo_all]
     todo = [t for t in todo_all if _key(t) not in done]
     print(f"{len(todo_all)} tasks, {len(todo_all) - len(todo)} done before", flush=True)
     with records_path.open("a") as sink:
@@ -374,6 +396,7 @@ def main(argv: list[str] | None = None) -> int:
         "turn": args.turn,
         "candidates": args.candidates,
         "samples": args.samples,
+        "settings": overrides,
         "rows": rows,
     }
     (out / "summary.json").write_text(json.dumps(summary, indent=2))

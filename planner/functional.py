@@ -151,9 +151,21 @@ class FunctionalPlanner:
         # samples drawn facing the intent go first (where the wrist decides some criteria)
         facing = meaning is not None and bool(WRIST_CRITERIA & set(meaning.criteria))
         program = grasp_program(self.hand, obj.collision_pieces(), s.program)
-        draw = direct_proposals if direct else learned_proposals
         t0 = time.perf_counter()
-        drawn = draw(obj, text, self.hand, s.learned.samples, s.learned.seed, s.learned.guidance)
+        if direct:
+            drawn = direct_proposals(
+                obj, text, self.hand, s.learned.samples, s.learned.seed, s.learned.guidance
+            )
+        else:
+            drawn = learned_proposals(
+                obj,
+                text,
+                self.hand,
+                s.learned.samples,
+                s.learned.seed,
+                s.learned.guidance,
+                s.learned.interaction_weights,
+            )
         drawn_time = time.perf_counter() - t0
         proposals = []
         for i in range(len(drawn.wrists)):

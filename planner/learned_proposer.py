@@ -61,14 +61,16 @@ def learned_proposals(
     samples: int,
     seed: int = 0,
     guidance: float | None = None,
+    weights: str | None = None,
 ) -> LearnedProposals:
     """`samples` interaction samples for the object's cloud, the sentence and the hand, each
     with its anchors' surface normals. D(R,O)'s targets are made per sample when it is solved
-    (`dro_targets`): most plans end after a few solves, and D(R,O) costs 0.1-0.6 s a sample."""
+    (`dro_targets`): most plans end after a few solves, and D(R,O) costs 0.1-0.6 s a sample.
+    `weights`: a folder of interaction weights (None: the shipped model)."""
     from learned.interaction import load_model
 
     t0 = time.perf_counter()
-    model = load_model()
+    model = load_model(weights)
     wrists, anchors = model.sample(obj.points, text, hand, samples, guidance, seed=seed)
     times = {"interaction": time.perf_counter() - t0}
     _, normals = surface_at(obj, anchors)

@@ -168,6 +168,9 @@ class LearnedSettings:
     # within 8 validations 70/82/66% vs 58/76/58% (allegro/leap/shadow), first sample about
     # the same, 1-2 s more per pair
     samples: int = 16
+    # the interaction model's weights: None the shipped model, else a folder holding
+    # interaction.safetensors (a training run's output, to try it before `--install`)
+    interaction_weights: str | None = None
     dro: bool = True  # D(R,O) point targets in the program (False: wrist + anchors)
     # the D(R,O) weights: None the shipped network, else a file or a name in learned/weights/
     # ("dro_no_anchors": the ablation trained without the anchors' contact map)

@@ -59,3 +59,12 @@ def test_the_intent_share_counts_grasps_held_on_the_part_only():
     )
     assert rows[0]["intent"] == pytest.approx(200 / 3) and rows[0]["within"] == 75.0
     assert "| 67% |" in benchmark.table(rows, 8)
+
+
+def test_benchmark_settings_are_checked_before_any_work(tmp_path):
+    from eval import benchmark
+
+    with pytest.raises(SystemExit, match="learned.bogus"):
+        benchmark.main(["--set", "learned.bogus=1", "--out", str(tmp_path)])
+    with pytest.raises(SystemExit, match="no interaction.safetensors"):
+        benchmark.main(["--set", f"learned.interaction_weights={tmp_path}", "--out", str(tmp_path)])

@@ -182,3 +182,22 @@ def test_cli_plans_a_cloud_file_from_a_sentence(tmp_path):
         capture_output=True, text=True, timeout=600,
     )  # fmt: skip
     assert model.returncode == 2 and "--proposer learned" in model.stderr
+
+
+def test_a_training_runs_interaction_weights_are_used_where_given(tmp_path):
+    """learned.interaction_weights: a folder of interaction weights (a run's output, tried
+    before --install) draws the samples instead of the shipped model."""
+    from learned.interaction import InteractionModel
+    from models.hands import load_hand
+    from planner.learned_proposer import learned_proposals
+
+    config = replace(TINY_INTERACTION, diffusion_steps=20, sample_steps=3)
+    InteractionModel.new(config, seed=0).save(str(tmp_path))
+    mug, hand = make_object("mug", 3), load_hand("allegro")
+    mine = learned_proposals(mug, "Use a mug by handle", hand, 2, weights=str(tmp_path))
+    again = InteractionModel.load(str(tmp_path)).sample(
+        mug.points, "Use a mug by handle", hand, 2, None, seed=0
+    )
+    np.testing.assert_allclose(mine.wrists, again[0])
+    shipped = learned_proposals(mug, "Use a mug by handle", hand, 2)
+    assert not np.allclose(shipped.wrists, mine.wrists)
