@@ -136,8 +136,10 @@ def full_object(cat: str, seed: int, turn: bool) -> ObjectModel:
 
 
 def run_task(task: tuple) -> Record:
-    method, hand_name, cat, seed, instruction, text, max_candidates, samples, view, turn = task[:10]
-    overrides = dict(task[10]) if len(task) > 10 else {}
+    method, hand_name, cat, seed, instruction, text, max_candidates, samples, view, turn, over = (
+        task
+    )
+    overrides = dict(over)
     part = instruction.rsplit(" by ", 1)[1]
     rec = Record(method, hand_name, cat, seed, instruction, text, part, view, turn)
     key = (method, hand_name)
@@ -202,7 +204,10 @@ def tasks(
     category_names: list[str] | None = None,
     view: str = "full",
     turn: bool = False,
+    overrides: dict[str, Any] | None = None,
 ) -> list[tuple]:
+    """One task per (pair, method); `overrides`: planner settings (dotted keys) for every
+    method, over each method's own."""
     from eval.planner_benchmark import pairs
     from learned.paraphrase import eval_paraphrases, request_of
 
@@ -216,7 +221,7 @@ def tasks(
             learned = METHODS[method]["proposer"] != "model"
             text = reworded[i % len(reworded)] if paraphrase and learned else instruction
             task = (method, hand, cat, seed, instruction, text, max_candidates, samples)
-            out.append((*task, view, turn))
+            out.append((*task, view, turn, tuple((overrides or {}).items())))
     return out
 
 
@@ -338,6 +343,16 @@ def main(argv: list[str] | None = None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     records_path = out / "records.jsonl"
     done = {r.key: r for r in _read(records_path)}
+    overrides = parse_overrides(args.set)
+    try:  # an unknown key or a bad value fails here, before any work
+        with_overrides(PlannerSettings(), overrides)
+    except DrograspError as err:
+        raise SystemExit(f"--set: {err}") from None
+    folder = overrides.get("learned.interaction_weights")
+    if folder and not (Path(folder) / "interaction.safetensors").is_file():
+        raise SystemExit(
+            f"--set learned.interaction_weights: no interaction.safetensors in {folder}"
+        )
     todo_all = tasks(
         args.split,
         args.objects_per_category,
@@ -349,18 +364,8 @@ def main(argv: list[str] | None = None) -> int:
         args.categories,
         args.view,
         args.turn,
+        overrides,
     )
-    overrides = parse_overrides(args.set)
-    try:  # an unknown key or a bad value fails here, before any work
-        with_overrides(PlannerSettings(), overrides)
-    except DrograspError as err:
-        raise SystemExit(f"--set: {err}") from None
-    folder = overrides.get("learned.interaction_weights")
-    if folder and not (Path(folder) / "interaction.safetensors").is_file():
-        raise SystemExit(
-            f"--set learned.interaction_weights: no interaction.safetensors in {folder}"
-        )
-    todo_all = [(*t, tuple(overrides.items())) for t in todo_all]
     todo = [t for t in todo_all if _key(t) not in done]
     print(f"{len(todo_all)} tasks, {len(todo_all) - len(todo)} done before", flush=True)
     with records_path.open("a") as sink:

@@ -14,6 +14,7 @@ Written by `planner.batch.dataset` (`drograsp dataset compact|generate`).
 from __future__ import annotations
 
 import hashlib
+import io
 import json
 import zipfile
 from collections import Counter
@@ -130,20 +131,21 @@ def block_digest(root: str | Path, name: str) -> str:
     return hashlib.sha256(block_path(root, name).read_bytes()).hexdigest()
 
 
-def read_intents(root: str | Path, name: str) -> np.ndarray | None:
-    """A block's `intents_met` verdicts, or None where it has none made for it as it is now."""
+def read_intents(root: str | Path, name: str, digest: str | None = None) -> np.ndarray | None:
+    """A block's `intents_met` verdicts, or None where it has none made for it as it is now
+    (`digest`: the block's `block_digest`, where the caller has read the block already)."""
     side = intents_path(root, name)
     if not side.is_file():
         return None
     try:
         with np.load(side, allow_pickle=False) as npz:
-            met, digest = npz["intents_met"], str(npz["block_sha256"])
+            met, made_for = npz["intents_met"], str(npz["block_sha256"])
     except (ValueError, OSError, EOFError, KeyError, zipfile.BadZipFile) as err:
         raise DatasetError(
             f"{side} is damaged ({type(err).__name__}: {err}); delete it and run "
             "`drograsp dataset check-intents` again"
         ) from None
-    return met if digest == block_digest(root, name) else None
+    return met if made_for == (digest or block_digest(root, name)) else None
 
 
 def _read_block(root: str | Path, name: str, dof: int) -> dict[str, np.ndarray]:
@@ -151,7 +153,8 @@ def _read_block(root: str | Path, name: str, dof: int) -> dict[str, np.ndarray]:
     if not path.is_file():
         raise DatasetError(f"{path} missing: the dataset folder is incomplete")
     try:
-        with np.load(path, allow_pickle=False) as npz:
+        data = path.read_bytes()  # read once: loaded, and hashed for its intents verdicts
+        with np.load(io.BytesIO(data), allow_pickle=False) as npz:
             arrays = {k: npz[k] for k in npz.files}
     except (ValueError, OSError, EOFError, KeyError, zipfile.BadZipFile) as err:
         raise DatasetError(
@@ -163,7 +166,7 @@ def _read_block(root: str | Path, name: str, dof: int) -> dict[str, np.ndarray]:
         if key not in arrays:
             dtype, shape = ARRAYS[key]
             arrays[key] = np.full((n, *shape), fill, dtype=dtype)
-    met = read_intents(root, name)  # verdicts made for this block as it is now
+    met = read_intents(root, name, hashlib.sha256(data).hexdigest())  # made for it as it is
     if met is not None and met.shape == arrays["intents_met"].shape:
         arrays["intents_met"] = met
     missing = set(ARRAYS) - set(arrays)
