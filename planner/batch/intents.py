@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from learned.dataset import block_digest, intents_path, read_intents, read_meta
+from learned.dataset import block_digest, block_path, intents_path, read_intents, read_meta
 from models.hands import HandModel, load_hand
 from models.objects import INTENTS, TABLE, ObjectModel, instruction_text, make_object
 from planner.intent import check_configuration
@@ -29,7 +29,7 @@ from planner.intent import check_configuration
 def block_intents(root: str | Path, name: str) -> np.ndarray:
     """(rows, 4) verdicts for one block, columns in the order of models.objects.INTENTS."""
     meta = read_meta(root)
-    with np.load(Path(root) / "blocks" / f"{name}.npz", allow_pickle=False) as npz:
+    with np.load(block_path(root, name), allow_pickle=False) as npz:
         a = {k: npz[k] for k in ("category", "seed", "hand", "part", "wrist", "q_grasp")}
     out = np.full((len(a["hand"]), len(INTENTS)), -1, dtype=np.int8)
     objects: dict[tuple[str, int], ObjectModel] = {}
@@ -75,22 +75,20 @@ def check_intents(
     root: str | Path,
     workers: int = 1,
     progress: Callable[[str, int], None] | None = None,
+    blocks: list[str] | None = None,
 ) -> list[str]:
-    """Write the verdicts of every pending block (`pending_blocks`); returns the blocks
-    written. `progress(block, rows)` is called as each block is done."""
+    """Write the verdicts of `blocks` (default: `pending_blocks`); returns the blocks written.
+    `progress(block, rows)` is called as each block is done."""
     root = str(root)
-    todo = pending_blocks(root)
+    todo = pending_blocks(root) if blocks is None else blocks
+    pool = ProcessPoolExecutor(workers) if workers > 1 and len(todo) > 1 else None
     done = []
-    if workers > 1 and len(todo) > 1:
-        with ProcessPoolExecutor(workers) as pool:
-            for name, rows in pool.map(_write, [root] * len(todo), todo):
-                done.append(name)
-                if progress:
-                    progress(name, rows)
-    else:
-        for name in todo:
-            _, rows = _write(root, name)
+    try:
+        for name, rows in (pool.map if pool else map)(_write, [root] * len(todo), todo):
             done.append(name)
             if progress:
                 progress(name, rows)
+    finally:
+        if pool:
+            pool.shutdown()
     return done

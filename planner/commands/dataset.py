@@ -180,7 +180,7 @@ def run_check_intents(args: argparse.Namespace) -> int:
 
     blocks, todo = read_meta(args.root)["blocks"], pending_blocks(args.root)
     with tqdm(total=len(todo), desc="check-intents", unit="block") as bar:
-        done = check_intents(args.root, args.workers, lambda name, rows: bar.update(1))
+        done = check_intents(args.root, args.workers, lambda name, rows: bar.update(1), todo)
     print(f"checked {len(done)} block(s); {len(blocks) - len(done)} were checked before")
     return 0
 
