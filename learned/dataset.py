@@ -294,7 +294,8 @@ class GraspDataset(Dataset):
 
 
 def dataset_info(root: str | Path) -> dict[str, Any]:
-    """Counts of grasps per split, hand, category, intent and source (and per split x hand)."""
+    """Counts of grasps per split, hand, category, intent and source (and per split x hand),
+    and of the grasps meeting each intent's definition."""
     meta = read_meta(root)
     info: dict[str, Any] = {
         "root": str(root),
@@ -306,6 +307,11 @@ def dataset_info(root: str | Path) -> dict[str, Any]:
         "intents": Counter(),
         "sources": Counter(),
         "split_hands": {},
+        # grasps meeting each intent's definition whatever they were made for (intents_met),
+        # those meeting none, and those not checked (`drograsp dataset check-intents`)
+        "intents_met": dict.fromkeys(INTENTS, 0),
+        "meets_none": 0,
+        "intents_unchecked": 0,
     }
     for split in SPLIT_NAMES:
         data = load_split(root, split)
@@ -316,6 +322,12 @@ def dataset_info(root: str | Path) -> dict[str, Any]:
         info["intents"].update(data.names("intents", "intent"))
         info["sources"].update(SOURCES[s] for s in data.arrays["source"])
         info["split_hands"][split] = dict(sorted(Counter(data.names("hands", "hand")).items()))
+        met = data.arrays["intents_met"]
+        checked = (met >= 0).any(axis=1)
+        for k, intent in enumerate(INTENTS):
+            info["intents_met"][intent] += int((met[:, k] == 1).sum())
+        info["meets_none"] += int((checked & ~(met == 1).any(axis=1)).sum())
+        info["intents_unchecked"] += int((~checked).sum())
     for key in ("hands", "categories", "intents", "sources"):
         order = meta[key] if key in meta else SOURCES
         info[key] = {name: info[key].get(name, 0) for name in order}

@@ -478,7 +478,10 @@ def test_check_intents_writes_every_intent_each_grasp_meets(tmp_path):
     meta["blocks"]["seeds-00001"]["grasps"] = 60
     (root / "meta.json").write_text(json.dumps(meta))
     assert (load_split(root, "train").arrays["intents_met"] == -1).all()  # not checked yet
+    assert dataset_info(root)["intents_unchecked"] == 60
     assert cli.main(["dataset", "check-intents", str(root)]) == 0
+    info = dataset_info(root)
+    assert info["intents_unchecked"] == 0 and info["meets_none"] <= 60
     assert (root / "intents" / "seeds-00001.npz").is_file()
     rows = {s: load_split(root, s) for s in ("train", "val", "test", "heldout")}
     checked = 0

@@ -201,3 +201,8 @@ def print_info(info: dict) -> None:
     print(f"{info['root']}: {info['total']} grasps")
     for key in ("splits", "hands", "categories", "intents", "sources"):
         print(f"  {key}: " + ", ".join(f"{k} {v}" for k, v in info[key].items()))
+    met = ", ".join(f"{k} {v}" for k, v in info["intents_met"].items())
+    print(
+        f"  meeting each intent's definition: {met}; none {info['meets_none']}; not checked "
+        f"{info['intents_unchecked']} (drograsp dataset check-intents)"
+    )
