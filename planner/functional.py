@@ -22,6 +22,7 @@ from models.errors import InstructionError, PlanningError
 from models.grasp import Grasp
 from models.hands import HandModel, load_hand
 from models.objects import Instruction, ObjectModel, parse_instruction
+from models.objects.completion import complete_view
 from models.objects.intents import WRIST_CRITERIA, Definition, label_free
 from models.reproducible import rounded
 from planner.grasp_program import GraspProgram, GraspTargets, SolveResult, grasp_program
@@ -82,6 +83,8 @@ class FunctionalPlanner:
         stages (planner.learned_proposer), as `settings.proposer` says; solving, the schedule
         and validation are the same for both."""
         text = instruction if isinstance(instruction, str) else instruction.text
+        if self.settings.complete_views:
+            obj = complete_view(obj)
         chosen = self.proposer_for(obj, instruction)
         if chosen in ("learned", "direct"):
             return self._plan_learned(obj, text, direct=chosen == "direct")

@@ -209,6 +209,10 @@ class PlannerSettings:
     # D(R,O) and no solver, validated as drawn (the paper's Scene-Diffuser comparison).
     proposer: str = "auto"
     protocol: str = "paper"
+    # A single-view cloud (an object with a `viewpoint`) is planned on with its hidden half
+    # guessed by mirror symmetry (models.objects.completion): without it fingers are planned
+    # through the unseen back of the object. The grasp is in the input's frame either way.
+    complete_views: bool = True
     schedule: ScheduleSettings = field(default_factory=ScheduleSettings)
     proposals: ProposalSettings = field(default_factory=ProposalSettings)
     intent: IntentSettings = field(default_factory=IntentSettings)

@@ -26,8 +26,9 @@ class Camera:
     azimuth_deg: float = 30.0
     elevation_deg: float = 30.0
     distance: float = 0.5
-    width: int = 160
-    height: int = 120
+    # half a RealSense D435's 640 x 480 depth stream: a pen at 0.5 m is still a few hundred rays
+    width: int = 320
+    height: int = 240
     fov_deg: float = 30.0  # vertical field of view
     depth_noise: float = 0.001  # m, standard deviation along the ray
 
