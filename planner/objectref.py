@@ -9,7 +9,7 @@ API on an array can be viewed again like one planned from the CLI.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -125,13 +125,18 @@ def _inline_labels(obj: ObjectModel, ref: Mapping[str, Any]) -> ObjectModel:
 
 
 def load_labelled(
-    path: str | Path, part_labels: str | Path | None = None, *, scale: float = 1.0
+    path: str | Path,
+    part_labels: str | Path | None = None,
+    *,
+    scale: float = 1.0,
+    viewpoint: Sequence[float] | None = None,
 ) -> ObjectModel:
     """Load a mesh or cloud, with part labels from a JSON file: {"part_names": [...], and
     "face_labels": [...] for a mesh or "point_labels": [...] for a cloud}. A mesh's
     `<stem>.parts.json` beside it is used when no file is given. The mesh is cleaned once;
-    face labels may follow the file's faces or the loader's (see `with_labels_file`)."""
-    obj = load_object(path, scale=scale)
+    face labels may follow the file's faces or the loader's (see `with_labels_file`).
+    `viewpoint`: the camera position of a single-view scan (a cloud)."""
+    obj = load_object(path, scale=scale, viewpoint=viewpoint)
     if part_labels is None:
         return obj
     return with_labels_file(obj, input_file(part_labels, "part labels file", ObjectError))

@@ -175,3 +175,29 @@ def test_meshcat_listens_on_localhost_and_pages_have_a_caption(tmp_path):
     text = page.read_text()
     assert "allegro · Use a mug by handle · holds · part touched: handle" in text
     assert "pregrasp &rarr; grasp &rarr; squeeze" in text
+
+
+def test_a_scanned_cloud_takes_its_camera_position(tmp_path, capsys):
+    """`--viewpoint` marks --mesh as a single-view scan (normals face the camera; the planner
+    completes the hidden side); it is refused for a library object or a mesh."""
+    from models.objects import make_object
+    from models.objects.views import single_view
+    from planner.commands.plan import check_object_arguments, object_from_args
+
+    points, _, eye = single_view(make_object("bottle", 1), seed=1)
+    scan = tmp_path / "scan.npy"
+    np.save(scan, points)
+    args = argparse.Namespace(
+        object=None, mesh=str(scan), part_labels=None, viewpoint=list(eye), pieces="auto"
+    )
+    check_object_arguments("plan", args)
+    obj = object_from_args(args)
+    assert np.allclose(obj.viewpoint, eye) and obj.mesh is None
+    plan = ["plan", "--text", "hold the bottle", "--hand", "allegro", "--viewpoint", "1", "0", "0"]
+    assert cli.main([*plan, "--object", "bottle"]) == 2
+    assert "--viewpoint places the camera" in capsys.readouterr().err
+    mesh = tmp_path / "box.obj"
+    trimesh.creation.box([0.05, 0.05, 0.05]).export(mesh)
+    assert cli.main([*plan, "--mesh", str(mesh)]) == 2
+    err = capsys.readouterr().err
+    assert "single-view point cloud" in err and "Traceback" not in err

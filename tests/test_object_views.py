@@ -72,3 +72,22 @@ def test_completion_leaves_meshes_and_clouds_without_a_camera_alone():
     assert complete_view(mug) is mug
     cloud = load_object(mug.sample_cloud(2048).points)
     assert complete_view(cloud) is cloud
+
+
+@pytest.mark.parametrize("complete", [True, False])
+def test_the_planner_plans_on_the_completed_view_unless_told_not_to(complete, monkeypatch):
+    from planner.functional import FunctionalPlanner
+    from planner.settings import PlannerSettings
+
+    view = single_view_object(make_object("bottle", 3), seed=3)
+    planner = FunctionalPlanner("allegro", PlannerSettings(complete_views=complete))
+    seen = []
+
+    def stop(obj, instruction):
+        seen.append(obj)
+        raise RuntimeError("stop here")
+
+    monkeypatch.setattr(planner, "proposer_for", stop)
+    with pytest.raises(RuntimeError, match="stop here"):
+        planner.plan(view, "hold the bottle")
+    assert len(seen[0].points) == (2 if complete else 1) * len(view.points)

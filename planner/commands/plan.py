@@ -37,6 +37,14 @@ def add_object_arguments(p: argparse.ArgumentParser) -> None:
         help="part labels JSON for --mesh (`drograsp objects label MESH OUT.json` writes one)",
     )
     p.add_argument(
+        "--viewpoint",
+        nargs=3,
+        type=float,
+        metavar=("X", "Y", "Z"),
+        help="camera position (metres, the cloud's frame) when --mesh is a single-view scan: "
+        "normals face it and the hidden side is completed by mirror symmetry before planning",
+    )
+    p.add_argument(
         "--pieces",
         choices=("auto", "coacd", "surface"),
         default="auto",
@@ -46,6 +54,11 @@ def add_object_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def check_object_arguments(parser_name: str, args: argparse.Namespace) -> None:
+    if getattr(args, "viewpoint", None) and not args.mesh:
+        raise DrograspError(
+            f"--viewpoint places the camera of a scanned cloud (--mesh); a library object "
+            f"(--object) is whole (drograsp {parser_name})"
+        )
     if args.part_labels and not args.mesh:
         raise DrograspError(
             f"--part-labels labels --mesh; a library object (--object) has its own parts "
@@ -59,7 +72,13 @@ def object_from_args(args: argparse.Namespace) -> Any:
 
     if args.object:
         return make_object(args.object, args.seed)
-    obj = load_labelled(args.mesh, args.part_labels)
+    viewpoint = getattr(args, "viewpoint", None)
+    obj = load_labelled(args.mesh, args.part_labels, viewpoint=viewpoint)
+    if viewpoint is not None and obj.mesh is not None:
+        raise DrograspError(
+            f"--viewpoint is for a single-view point cloud; {args.mesh} is a mesh, which is "
+            "planned on whole"
+        )
     if obj.mesh is not None:
         obj.pieces = getattr(args, "pieces", "auto")
     return obj
