@@ -91,3 +91,11 @@ def test_the_planner_plans_on_the_completed_view_unless_told_not_to(complete, mo
     with pytest.raises(RuntimeError, match="stop here"):
         planner.plan(view, "hold the bottle")
     assert len(seen[0].points) == (2 if complete else 1) * len(view.points)
+
+
+def test_eval_completion_reports_what_the_mirror_added():
+    from eval.completion import measure, table
+
+    row = measure("hammer", 5)
+    assert row.completed_coverage > row.view_coverage and row.plane == "below"
+    assert "| hammer | 1 |" in table([row]) and "| all | 1 |" in table([row])
