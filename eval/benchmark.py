@@ -88,6 +88,9 @@ class Record:
     first_ok: bool = False
     returned_ok: bool = False
     held: bool = False
+    # the returned grasp held on what the method planned on (a single view: its completion);
+    # `held` is the same grasp on the full object
+    planned: bool = False
     part_touched: str | None = None
     # the returned grasp, held on the instructed part, against its intent's definition
     # (planner.intent), checked on the labelled object; None: not held on the part
@@ -179,7 +182,8 @@ def run_task(task: tuple) -> Record:
     first = next((c for c in result.candidates if c.order == 0), None)
     rec.first_ok = holds(first) and touched_part(first.grasp, obj, hand) == part
     best = result.best
-    rec.held = result.success and holds(best)
+    rec.planned = bool(result.success)
+    rec.held = rec.planned and holds(best)
     if rec.held:
         rec.part_touched = touched_part(result.grasp, obj, hand)
         rec.returned_ok = rec.part_touched == part
@@ -245,6 +249,7 @@ def summarise(records: list[Record]) -> list[dict]:
                     "first": 100 * float(np.mean([r.first_ok for r in rs])),
                     "within": 100 * float(np.mean([r.returned_ok for r in rs])),
                     "held": 100 * float(np.mean([r.held for r in rs])),
+                    "held_as_planned": 100 * float(np.mean([r.planned for r in rs])),
                     "part_accuracy": (
                         100 * float(np.mean([r.returned_ok for r in held])) if held else 0.0
                     ),
