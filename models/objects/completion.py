@@ -34,7 +34,8 @@ DEPTH_TOLERANCE = 0.004  # m: a reflected point this far in front of the seen su
 # share of reflected points that add surface (farther than two point spacings from the seen
 # ones): among planes the image allows, the one that fills most of what was hidden
 NOVELTY_WEIGHT = 0.05
-MAX_CONFLICT = 0.08  # share of contradicting reflected points above which no plane is trusted
+MAX_CONFLICT = 0.08
+SMOOTH_NEIGHBOURS = 16  # share of contradicting reflected points above which no plane is trusted
 
 
 @dataclass(frozen=True)
@@ -135,24 +136,41 @@ def find_mirror(points: np.ndarray, eye: np.ndarray) -> Mirror | None:
     return best
 
 
+def smooth(points: np.ndarray, k: int = SMOOTH_NEIGHBOURS) -> np.ndarray:
+    """Each point moved onto the plane fitted to its k nearest neighbours. A depth camera's
+    noise (about 1 mm along the rays) would otherwise make every convex collision piece bulge
+    out to its outermost noisy points, 2-3 mm above the real surface, and fingers planned
+    against it stop short of the object."""
+    pts = np.asarray(points, dtype=float)
+    k = min(k, len(pts))
+    near = pts[cKDTree(pts).query(pts, k=k)[1]]
+    centre = near.mean(axis=1)
+    spread = near - centre[:, None, :]
+    _, vectors = np.linalg.eigh(np.einsum("nki,nkj->nij", spread, spread))
+    normal = vectors[:, :, 0]  # smallest variance: the local surface normal
+    return pts - np.einsum("ni,ni->n", pts - centre, normal)[:, None] * normal
+
+
 def complete_view(obj: ObjectModel) -> ObjectModel:
-    """A single-view cloud (an ObjectModel with a `viewpoint`) with its mirrored half added:
-    points, normals and part labels reflected through `find_mirror`'s plane. Anything else
-    (a mesh, a cloud without a viewpoint, a view no plane explains) comes back unchanged."""
+    """A single-view cloud (an ObjectModel with a `viewpoint`) smoothed (`smooth`) and with its
+    mirrored half added: points, normals and part labels reflected through `find_mirror`'s
+    plane (only smoothed when no plane explains the view). Anything else (a mesh, a cloud
+    without a viewpoint) comes back unchanged."""
     from .loading import load_object
 
     if obj.mesh is not None or obj.viewpoint is None:
         return obj
-    points, normals = obj.points, obj.normals
+    points, normals, labels = smooth(obj.points), obj.normals, obj.point_labels
     mirror = find_mirror(points, np.asarray(obj.viewpoint, dtype=float))
-    if mirror is None:
-        return obj
-    n = mirror.normal
-    labels = obj.point_labels
+    if mirror is not None:
+        n = mirror.normal
+        points = np.vstack([points, reflect(points, n, mirror.offset)])
+        normals = np.vstack([normals, normals - 2.0 * (normals @ n)[:, None] * n])
+        labels = None if labels is None else np.concatenate([labels, labels])
     return load_object(
-        np.vstack([points, reflect(points, n, mirror.offset)]),
+        points,
         name=f"{obj.name}_completed",
-        normals=np.vstack([normals, normals - 2.0 * (normals @ n)[:, None] * n]),
-        labels=None if labels is None else np.concatenate([labels, labels]),
+        normals=normals,
+        labels=labels,
         part_names=obj.part_names if labels is not None else (),
     )
