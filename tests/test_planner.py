@@ -578,3 +578,13 @@ def test_plan_grasp_refuses_bad_settings_before_planning():
         checked(bottle, "Hold a bottle by body", 5)
     result = checked(bottle, "Hold a bottle by body", "allegro")
     assert result.grasp.metrics["object"] == {"category": "bottle", "seed": 1}
+
+
+def test_the_settings_import_from_the_package():
+    import planner
+    import planner.settings
+
+    for name in planner.SETTINGS:
+        assert getattr(planner, name) is getattr(planner.settings, name)
+    with pytest.raises(AttributeError, match="no attribute 'Nothing'"):
+        planner.Nothing  # noqa: B018
