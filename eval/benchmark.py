@@ -28,7 +28,7 @@ method:
 (learned.paraphrase.EVAL_TEMPLATES, never trained on); the model-based planner keeps the
 canonical text it needs. `--turn` turns every object (any yaw, a tilt up to 30 degrees, one
 turn per pair). `--view single` plans on what a depth camera sees from one viewpoint
-(models.objects.views: 160 x 120 rays, 1 mm depth noise; the model-based planner gets the
+(models.objects.views: 320 x 240 rays, 1 mm depth noise; the model-based planner gets the
 seen faces' labels) and validates the chosen grasps in MuJoCo against the full object. Records go to OUT/records.jsonl as they finish, so an interrupted run
 resumes; OUT/summary.json, OUT/table.md and OUT/bars.png are written at the end.
 """

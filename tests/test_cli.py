@@ -177,6 +177,7 @@ def test_meshcat_listens_on_localhost_and_pages_have_a_caption(tmp_path):
     assert "pregrasp &rarr; grasp &rarr; squeeze" in text
 
 
+@pytest.mark.usefixtures("needs_open3d")
 def test_a_scanned_cloud_takes_its_camera_position(tmp_path, capsys):
     """`--viewpoint` marks --mesh as a single-view scan (normals face the camera; the planner
     completes the hidden side); it is refused for a library object or a mesh."""

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 import pytest
 import trimesh
@@ -13,6 +15,7 @@ from models.objects.completion import complete_view
 from models.objects.views import Camera, random_turn, single_view, single_view_object, turned
 
 
+@pytest.mark.usefixtures("needs_open3d")
 def test_a_single_view_is_the_near_side_of_the_surface_with_depth_noise():
     mug = make_object("mug", 3)
     points, labels, eye = single_view(mug, Camera(depth_noise=0.001), seed=0)
@@ -28,6 +31,7 @@ def test_a_single_view_is_the_near_side_of_the_surface_with_depth_noise():
     assert not single_view_object(mug, seed=0).labelled
 
 
+@pytest.mark.usefixtures("needs_open3d")
 def test_a_view_needs_a_mesh_and_enough_points():
     cloud = load_object(make_object("mug", 3).sample_cloud(2048).points)
     with pytest.raises(ObjectError, match="from a mesh"):
@@ -50,6 +54,7 @@ def test_a_turned_object_keeps_its_shape_and_labels():
         turned(mug, np.eye(3) * 2)
 
 
+@pytest.mark.usefixtures("needs_open3d")
 @pytest.mark.parametrize("category", ["bottle", "wine_glass", "hammer", "knife"])
 def test_a_completed_view_covers_the_hidden_side_where_the_object_is(category):
     obj = make_object(category, 3)
@@ -74,6 +79,7 @@ def test_completion_leaves_meshes_and_clouds_without_a_camera_alone():
     assert complete_view(cloud) is cloud
 
 
+@pytest.mark.usefixtures("needs_open3d")
 @pytest.mark.parametrize("complete", [True, False])
 def test_the_planner_plans_on_the_completed_view_unless_told_not_to(complete, monkeypatch):
     from planner.functional import FunctionalPlanner
@@ -93,9 +99,16 @@ def test_the_planner_plans_on_the_completed_view_unless_told_not_to(complete, mo
     assert len(seen[0].points) == (2 if complete else 1) * len(view.points)
 
 
+@pytest.mark.usefixtures("needs_open3d")
 def test_eval_completion_reports_what_the_mirror_added():
     from eval.completion import measure, table
 
     row = measure("hammer", 5)
     assert row.completed_coverage > row.view_coverage and row.plane == "below"
     assert "| hammer | 1 |" in table([row]) and "| all | 1 |" in table([row])
+
+
+def test_a_view_without_open3d_says_which_library_is_missing(monkeypatch):
+    monkeypatch.setitem(sys.modules, "open3d", None)  # the import fails as on a slim machine
+    with pytest.raises(ObjectError, match="rendering a single view needs Open3D.*libusb"):
+        single_view(make_object("mug", 3))

@@ -11,6 +11,7 @@ import dataclasses
 import json
 import os
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import trimesh
@@ -316,15 +317,21 @@ def _from_cloud(
     )
 
 
-def _read_pcd(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
+def import_open3d(purpose: str, alternative: str = "") -> Any:
+    """Open3D, or an ObjectError saying `purpose` needs it and which system library is missing:
+    Open3D loads libusb and libGL when imported, which a slim machine may lack."""
     try:
-        import open3d as o3d
-    except (ImportError, OSError) as err:  # open3d loads system libraries (libusb, libGL)
+        import open3d
+    except (ImportError, OSError) as err:
         raise ObjectError(
-            f"reading {path.name} needs Open3D, which failed to import ({err}); install the "
-            "missing system library (Debian/Ubuntu: apt-get install libusb-1.0-0 libgl1) or "
-            "convert the cloud to .ply, .npy or .xyz"
+            f"{purpose} needs Open3D, which failed to import ({err}); install the missing system "
+            "library (Debian/Ubuntu: apt-get install libusb-1.0-0 libgl1)" + alternative
         ) from err
+    return open3d
+
+
+def _read_pcd(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
+    o3d = import_open3d(f"reading {path.name}", " or convert the cloud to .ply, .npy or .xyz")
     pcd = o3d.io.read_point_cloud(str(path))
     pts = np.asarray(pcd.points)
     if len(pts) == 0:

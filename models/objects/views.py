@@ -15,6 +15,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from ..errors import ObjectError
+from .loading import import_open3d
 from .model import ObjectModel
 
 
@@ -44,10 +45,9 @@ def single_view(
     """(points (N, 3), their part labels (N,) or None, the camera position) the camera sees
     of the object's mesh. ObjectError when the object has no mesh or the view holds fewer than
     `min_points` points (the object is too far or too small for the camera)."""
-    import open3d as o3d
-
     if obj.mesh is None:
         raise ObjectError("a single view is rendered from a mesh; this object is a cloud")
+    o3d = import_open3d("rendering a single view")
     cam = camera or Camera()
     mesh = obj.mesh
     target = mesh.bounds.mean(axis=0)
