@@ -34,8 +34,8 @@ DEPTH_TOLERANCE = 0.004  # m: a reflected point this far in front of the seen su
 # share of reflected points that add surface (farther than two point spacings from the seen
 # ones): among planes the image allows, the one that fills most of what was hidden
 NOVELTY_WEIGHT = 0.05
-MAX_CONFLICT = 0.08
-SMOOTH_NEIGHBOURS = 16  # share of contradicting reflected points above which no plane is trusted
+MAX_CONFLICT = 0.08  # share of contradicting reflected points above which no plane is trusted
+SMOOTH_NEIGHBOURS = 16  # each seen point moves onto the plane fitted to this many neighbours
 
 
 @dataclass(frozen=True)
