@@ -402,7 +402,7 @@ def train(cfg: TrainConfig, progress: bool = True) -> Path:
     stops = {"out": None, "minutes": None, "steps": None}  # a resumed run may stop elsewhere
     settings = json.dumps(asdict(cfg) | stops, sort_keys=True)
     if ckpt.is_file():
-        state = torch.load(ckpt, weights_only=False)
+        state = torch.load(ckpt, weights_only=True)  # tensors and plain values, no pickle
         if state["settings"] != settings:
             raise TrainingError(
                 f"{ckpt} was written by a run with other settings; use another --out or "
