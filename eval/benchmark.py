@@ -29,8 +29,10 @@ method:
 canonical text it needs. `--turn` turns every object (any yaw, a tilt up to 30 degrees, one
 turn per pair). `--view single` plans on what a depth camera sees from one viewpoint
 (models.objects.views: 320 x 240 rays, 1 mm depth noise; the model-based planner gets the
-seen faces' labels) and validates the chosen grasps in MuJoCo against the full object. Records go to OUT/records.jsonl as they finish, so an interrupted run
-resumes; OUT/summary.json, OUT/table.md and OUT/bars.png are written at the end.
+seen faces' labels) and validates the chosen grasps in MuJoCo against the full object; `--view
+cloud` does the same with 4096 random surface points (a complete scan, collision pieces made
+from the cloud, as for drograsp demo's clouds). Records go to OUT/records.jsonl as they finish,
+so an interrupted run resumes; OUT/summary.json, OUT/table.md and OUT/bars.png are written at the end.
 """
 
 from __future__ import annotations
@@ -51,7 +53,7 @@ from tqdm import tqdm
 from models.errors import DrograspError
 from models.hands import available_hands, load_hand
 from models.objects import ObjectModel, make_object
-from models.objects.views import random_turn, single_view_object, turned
+from models.objects.views import random_turn, sampled_cloud_object, single_view_object, turned
 from planner.commands.validate import parse_overrides
 from planner.functional import FunctionalPlanner
 from planner.intent import check_configuration
@@ -74,6 +76,15 @@ METHODS: dict[str, dict[str, Any]] = {
 }
 
 
+CLOUD_POINTS = 4096  # as drograsp demo's unlabelled clouds
+# what the methods are given (MuJoCo always validates the returned grasp on the full object)
+VIEWS = {
+    "full": "full objects",  # the mesh (the learned methods without its part labels)
+    "cloud": f"{CLOUD_POINTS}-point surface clouds",  # a complete scan: pieces from the cloud
+    "single": "single-view clouds",  # one depth camera view, completed by the planner
+}
+
+
 @dataclass
 class Record:
     method: str
@@ -83,13 +94,13 @@ class Record:
     instruction: str  # canonical
     text: str  # what the method was given
     part: str
-    view: str = "full"  # "full" object or "single" view
+    view: str = "full"  # VIEWS: the "full" object, a sampled "cloud" or a "single" view
     turn: bool = False
     first_ok: bool = False
     returned_ok: bool = False
     held: bool = False
-    # the returned grasp held on what the method planned on (a single view: its completion);
-    # `held` is the same grasp on the full object
+    # the returned grasp held on what the method planned on (a cloud: pieces made from it; a
+    # single view: its completion); `held` is the same grasp on the full object
     planned: bool = False
     part_touched: str | None = None
     # the returned grasp, held on the instructed part, against its intent's definition
@@ -159,6 +170,8 @@ def run_task(task: tuple) -> Record:
         obj = full_object(cat, seed, turn)
         if view == "single":
             given = single_view_object(obj, seed=seed, labelled=oracle)
+        elif view == "cloud":
+            given = sampled_cloud_object(obj, CLOUD_POINTS, seed=seed, labelled=oracle)
         else:
             given = obj if oracle else unlabelled(obj)
         start = time.perf_counter()
@@ -170,7 +183,7 @@ def run_task(task: tuple) -> Record:
     hand = planner.hand
 
     def holds(cand) -> bool:
-        """Held in planning, and (planned on a single view) against the full object too."""
+        """Held in planning, and (planned on a cloud or a view) against the full object too."""
         if cand is None or not cand.success:
             return False
         if view == "full":
@@ -326,7 +339,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--methods", nargs="+", default=list(METHODS), choices=list(METHODS))
     p.add_argument("--categories", nargs="+", default=None, help="default: every category")
     p.add_argument("--paraphrase", action="store_true", help="evaluation-only rewordings")
-    p.add_argument("--view", default="full", choices=("full", "single"), help="object or one view")
+    p.add_argument("--view", default="full", choices=VIEWS, help="what the methods are given")
     p.add_argument("--turn", action="store_true", help="turn every object (yaw, tilt <= 30 deg)")
     p.add_argument("--candidates", type=int, default=8, help="validations per pair at most")
     p.add_argument("--samples", type=int, default=16, help="learned proposals per pair")
@@ -393,7 +406,7 @@ def main(argv: list[str] | None = None) -> int:
     rows = summarise(records)
     text = table(rows, args.candidates)
     words = "evaluation-only rewordings" if args.paraphrase else "canonical instructions"
-    seen = "single-view clouds" if args.view == "single" else "full objects"
+    seen = VIEWS[args.view]
     title = (
         f"{args.split} split, {args.objects_per_category} object(s) per category, {words}, "
         f"{seen}{', turned' if args.turn else ''}"

@@ -68,3 +68,29 @@ def test_benchmark_settings_are_checked_before_any_work(tmp_path):
         benchmark.main(["--set", "learned.bogus=1", "--out", str(tmp_path)])
     with pytest.raises(SystemExit, match="no interaction.safetensors"):
         benchmark.main(["--set", f"learned.interaction_weights={tmp_path}", "--out", str(tmp_path)])
+
+
+@pytest.mark.parametrize("view", ["full", "cloud"])
+def test_each_view_gives_the_planner_its_input_and_judges_on_the_object(view, monkeypatch):
+    """`--view cloud` plans on surface samples (no mesh, no labels for learned methods); the
+    grasp is then judged on the full object, whose mesh the benchmark keeps."""
+    given = []
+
+    class Stop(Exception):
+        pass
+
+    def plan(self, obj, text):
+        given.append(obj)
+        raise Stop
+
+    monkeypatch.setattr(benchmark.FunctionalPlanner, "plan", plan)
+    monkeypatch.setattr(benchmark, "_PLANNERS", {})
+    task = ("learned", "allegro", "mug", 3, "Use a mug by handle", "Use a mug by handle")
+    rec = benchmark.run_task((*task, 8, 4, view, False, ()))
+    assert rec.error.startswith("Stop") and rec.view == view
+    (obj,) = given
+    assert not obj.labelled
+    if view == "cloud":
+        assert obj.mesh is None and len(obj.points) == benchmark.CLOUD_POINTS
+    else:
+        assert obj.mesh is not None

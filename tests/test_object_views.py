@@ -12,7 +12,14 @@ from scipy.spatial import cKDTree
 from models.errors import ObjectError
 from models.objects import load_object, make_object
 from models.objects.completion import complete_view
-from models.objects.views import Camera, random_turn, single_view, single_view_object, turned
+from models.objects.views import (
+    Camera,
+    random_turn,
+    sampled_cloud_object,
+    single_view,
+    single_view_object,
+    turned,
+)
 
 
 @pytest.mark.usefixtures("needs_open3d")
@@ -112,3 +119,15 @@ def test_a_view_without_open3d_says_which_library_is_missing(monkeypatch):
     monkeypatch.setitem(sys.modules, "open3d", None)  # the import fails as on a slim machine
     with pytest.raises(ObjectError, match="rendering a single view needs Open3D.*libusb"):
         single_view(make_object("mug", 3))
+
+
+def test_a_sampled_cloud_is_the_whole_surface_without_its_mesh():
+    mug = make_object("mug", 3)
+    cloud = sampled_cloud_object(mug, 2000, seed=1)
+    assert cloud.mesh is None and cloud.viewpoint is None and not cloud.labelled
+    assert len(cloud.points) == 2000
+    near = cKDTree(mug.sample_cloud(20000, seed=2).points).query(cloud.points)[0]
+    assert near.max() < 0.005  # on the surface
+    labelled = sampled_cloud_object(mug, 2000, seed=1, labelled=True)
+    assert labelled.labelled and labelled.part_names == mug.part_names
+    assert np.allclose(labelled.points, cloud.points)

@@ -103,6 +103,25 @@ def single_view_object(
     )
 
 
+def sampled_cloud_object(
+    obj: ObjectModel, points: int = 4096, seed: int = 0, labelled: bool = False
+) -> ObjectModel:
+    """`points` random samples of the whole surface as a cloud, normals estimated as for a
+    user's cloud (no viewpoint): the object as a complete scan or a simulator gives it, planned
+    with collision pieces made from the cloud rather than from the mesh. With `labelled`, the
+    samples' part labels and the object's part names come along."""
+    from .loading import load_object
+
+    sample = obj.sample_cloud(points, seed)
+    keep = labelled and sample.labels is not None and obj.part_names
+    return load_object(
+        sample.points,
+        name=f"{obj.name}_cloud",
+        labels=sample.labels if keep else None,
+        part_names=obj.part_names if keep else (),
+    )
+
+
 def random_turn(seed: int, max_tilt_deg: float = 30.0) -> np.ndarray:
     """A 3x3 rotation: any yaw, then a tilt about a random horizontal axis up to `max_tilt_deg`
     (objects stand on something: upside-down mugs are another task)."""
