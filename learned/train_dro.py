@@ -1,6 +1,6 @@
 """Training of the D(R,O) network on the functional grasp dataset.
 
-    python -m learned.train_dro --data data/grasps_v2 --out runs/dro [--minutes 15]
+    drograsp train dro --data data/grasps_v2 --out runs/dro [--minutes 15]
 
 Each dataset row gives one sample: the object (regenerated once per (category, seed) and
 subsampled to `dense_points`), its 512 x 4 input from the row's anchors (learned.contact_map,
@@ -484,42 +484,25 @@ def train(cfg: TrainConfig, progress: bool = True) -> Path:
     return weights
 
 
-NO_ANCHORS_HELP = (
-    "the ablation without anchors: object inputs by farthest point sampling, no contact map "
-    "(installs as dro_no_anchors.safetensors)"
-)
+# TrainConfig fields that `drograsp train dro` sets (planner/commands/train.py)
 OPTIONS = (
-    ("epochs", int, "passes over the train rows"),
-    ("minutes", float, "stop (and save) after this much training time"),
-    ("steps", int, "stop (and save) after this many steps (the schedule spans the epochs)"),
-    ("batch", int, "grasps per step"),
-    ("lr", float, "peak learning rate (one-cycle schedule)"),
-    ("hand_points", int, "hand points per step whose rows of D enter the losses"),
-    ("pose_weight", float, "weight of the pose loss through multilateration + Kabsch"),
-    ("seed", int, "seed of everything random"),
-    ("threads", int, "torch threads"),
-    ("checkpoint_every", int, "steps between checkpoints (and validation)"),
-    ("max_rows", int, "only the first rows of each split (quick runs)"),
+    "epochs",
+    "minutes",
+    "steps",
+    "batch",
+    "lr",
+    "hand_points",
+    "pose_weight",
+    "seed",
+    "threads",
+    "checkpoint_every",
+    "max_rows",
 )
-
-
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """The training options; every default (None) is TrainConfig's. Imports nothing heavy, so
-    the CLI can copy this list without importing torch (see OPTIONS)."""
-    parser.add_argument("--data", required=True, help="dataset folder (drograsp dataset ...)")
-    parser.add_argument("--out", required=True, help="run folder: checkpoint, weights, plot")
-    for name, kind, text in OPTIONS:
-        parser.add_argument("--" + name.replace("_", "-"), type=kind, default=None, help=text)
-    parser.add_argument("--hands", nargs="+", default=None, help="train on these hands only")
-    parser.add_argument("--no-anchors", action="store_true", help=NO_ANCHORS_HELP)
-    parser.add_argument(
-        "--install", action="store_true", help=f"copy the final weights to {WEIGHTS.parent}"
-    )
 
 
 def config_from_args(args: argparse.Namespace) -> TrainConfig:
     """A TrainConfig from parsed options; options left out keep TrainConfig's defaults."""
-    given = {name: getattr(args, name, None) for name, _, _ in OPTIONS}
+    given = {name: getattr(args, name, None) for name in OPTIONS}
     data = args.data[0] if isinstance(args.data, list) and len(args.data) == 1 else args.data
     cfg = TrainConfig(data, args.out, **{k: v for k, v in given.items() if v is not None})
     if getattr(args, "hands", None):
@@ -544,13 +527,3 @@ def run(args: argparse.Namespace) -> int:
         shutil.copyfile(weights, target)
         print(f"installed: {target}")
     return 0
-
-
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m learned.train_dro", description=__doc__)
-    add_arguments(parser)
-    return run(parser.parse_args(argv))
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

@@ -238,6 +238,22 @@ def test_cli_train_dro_options_reach_the_config():
     assert cfg.batch == train_dro.TrainConfig("", "").batch  # left out: the config's default
 
 
+def test_every_training_option_is_on_the_command_line():
+    """`drograsp train dro` is the one way to train D(R,O): each option in train_dro.OPTIONS
+    reaches the config with a value that differs from its default."""
+    from planner.cli import build_parser
+
+    base = train_dro.TrainConfig("", "")
+    argv = ["train", "dro", "--data", "D", "--out", "O"]
+    for name in train_dro.OPTIONS:
+        default = getattr(base, name)
+        value = 7 if default is None else default * 2 + 1
+        argv += ["--" + name.replace("_", "-"), str(value)]
+    cfg = train_dro.config_from_args(build_parser(argv).parse_args(argv))
+    for name in train_dro.OPTIONS:
+        assert getattr(cfg, name) != getattr(base, name), name
+
+
 def test_cli_train_dro_steps_and_the_ablation_without_anchors():
     from planner.cli import build_parser
 

@@ -103,6 +103,31 @@ def register(sub: argparse._SubParsersAction) -> None:
     d.add_argument("--batch", type=positive_int, default=None, help="grasps per step (default 8)")
     d.add_argument("--seed", type=non_negative_int, default=None)
     d.add_argument("--threads", type=positive_int, default=None, help="torch threads (default 1)")
+    d.add_argument("--lr", type=positive_float, default=None, help="peak learning rate (1e-3)")
+    d.add_argument(
+        "--hand-points",
+        type=positive_int,
+        default=None,
+        help="hand points per step whose rows of D enter the losses (default 128)",
+    )
+    d.add_argument(
+        "--pose-weight",
+        type=float,
+        default=None,
+        help="weight of the pose loss through multilateration + Kabsch (default 0.1)",
+    )
+    d.add_argument(
+        "--checkpoint-every",
+        type=positive_int,
+        default=None,
+        help="steps between checkpoints and validations (default 200)",
+    )
+    d.add_argument(
+        "--max-rows",
+        type=positive_int,
+        default=None,
+        help="only the first rows of each split (quick runs)",
+    )
     d.add_argument("--hands", nargs="+", default=None, help="train on these hands' rows only")
     d.add_argument(
         "--no-anchors",
