@@ -132,7 +132,8 @@ class ObjectPoints:
                 "part_names": np.array(obj.part_names),
             }
             self.folder.mkdir(parents=True, exist_ok=True)
-            tmp = path.with_suffix(".tmp.npz")
+            # a name of this process's own: two runs sharing the cache may write the same item
+            tmp = path.with_suffix(f".{os.getpid()}.tmp.npz")
             np.savez(tmp, **item)
             os.replace(tmp, path)
         item["groups"] = None
