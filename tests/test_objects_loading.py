@@ -300,3 +300,14 @@ def test_loading_arguments_are_checked(tmp_path):
         load_object(ply)
     with pytest.raises(ObjectError, match="seed must be a non-negative integer"):
         make_object("mug", 1.5)
+
+
+@pytest.mark.parametrize(
+    "category, seed", [("mug", 3), ("wine_glass", 1), ("scissors", 3), ("screwdriver", 1)]
+)
+def test_sparse_clouds_of_thin_walls_and_thin_objects_get_outward_normals(category, seed):
+    """A 4096-point cloud (the demo's) of a 4 mm wall or a 2 mm blade: the spanning tree alone
+    got half of a mug's normals wrong and turned this screwdriver inside out (0% right)."""
+    s = make_object(category, seed).sample_cloud(4096, seed)
+    est = load_object(s.points).normals
+    assert (np.einsum("ij,ij->i", est, s.normals) > 0).mean() > 0.85
