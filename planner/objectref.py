@@ -43,6 +43,8 @@ def object_ref(obj: ObjectModel) -> dict[str, Any]:
             ref["scale"] = obj.source_scale
         if obj.labels_source is not None:
             ref["part_labels"] = obj.labels_source
+        if obj.viewpoint is not None:  # in the file's units, as load_object takes it
+            ref["viewpoint"] = [float(x) / obj.source_scale for x in obj.viewpoint]
     elif obj.mesh is not None:
         ref = {
             "name": obj.name,
@@ -81,7 +83,8 @@ def resolve_object(ref: Any) -> ObjectModel:
                 f"got {ref['path']!r}"
             )
         scale = ref.get("scale", 1.0)
-        obj = load_labelled(ref["path"], ref.get("part_labels"), scale=scale)
+        viewpoint = ref.get("viewpoint")
+        obj = load_labelled(ref["path"], ref.get("part_labels"), scale=scale, viewpoint=viewpoint)
     elif "cloud" in ref:
         obj = load_object(
             as_array(ref["cloud"], "cloud of the object reference"),

@@ -62,6 +62,22 @@ def test_references_rebuild_every_kind_of_object(tmp_path):
     assert back.pieces == "surface"
 
 
+def test_a_scanned_file_keeps_its_camera(tmp_path):
+    """A single-view scan loaded from a file in millimetres with its camera: the grasp's
+    reference brings the camera back, so the object is completed again as it was planned."""
+    pts = make_object("bottle", 1).sample_cloud(2000, seed=1).points
+    seen = pts[pts[:, 0] > 0]
+    path = tmp_path / "scan_mm.npy"
+    np.save(path, 1000 * seen)
+    camera = np.array([0.5, 0.0, 0.2])
+    scan = load_labelled(path, scale=0.001, viewpoint=1000 * camera)
+    np.testing.assert_allclose(scan.viewpoint, camera)
+    ref = json.loads(json.dumps(object_ref(scan)))
+    back = resolve_object(ref)
+    np.testing.assert_allclose(back.viewpoint, camera)
+    np.testing.assert_allclose(back.normals, scan.normals, atol=1e-9)
+
+
 @pytest.mark.parametrize(
     ("ref", "message"),
     [

@@ -76,6 +76,10 @@ def test_viewpoint_orients_toward_camera():
     camera = np.array([0.0, 0.0, 1.0])
     obj = load_object(pts[pts[:, 2] > 0], viewpoint=camera)
     assert (np.einsum("ij,ij->i", obj.normals, camera - obj.points) > 0).all()
+    # a scan in millimetres: the camera is in the cloud's units and scaled with it
+    mm = load_object(1000 * pts[pts[:, 2] > 0], viewpoint=1000 * camera, scale=0.001)
+    np.testing.assert_allclose(mm.viewpoint, camera)
+    np.testing.assert_allclose(mm.normals, obj.normals, atol=1e-9)
 
 
 def test_given_normals_and_labels_are_kept():

@@ -38,7 +38,8 @@ def load_object(
     """Load a mesh (obj, stl, ply, glb) or a cloud ((N, 3) array, .npy, .ply, .pcd, .xyz) in metres.
 
     `scale` multiplies coordinates first (0.001 for millimetres). For a cloud, `normals` (N, 3) are
-    used as given, else estimated (toward `viewpoint` for a single-view scan); `labels` (N,) with
+    used as given, else estimated (toward `viewpoint`, the camera of a single-view scan, in the
+    cloud's units and scaled with it); `labels` (N,) with
     `part_names` label its points. A mesh file with a `<stem>.parts.json` beside it (as written by
     `drograsp objects export`) gets its per-face part labels back.
     """
@@ -145,9 +146,9 @@ def _point3(value: object, what: str) -> np.ndarray | None:
     try:
         arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError):
-        raise ObjectError(f"{what} must be 3 numbers (x, y, z in metres), got {value!r}") from None
+        raise ObjectError(f"{what} must be 3 numbers (x, y, z), got {value!r}") from None
     if arr.shape != (3,) or not np.isfinite(arr).all():
-        raise ObjectError(f"{what} must be 3 finite numbers (x, y, z in metres), got {value!r}")
+        raise ObjectError(f"{what} must be 3 finite numbers (x, y, z), got {value!r}")
     return arr
 
 
@@ -290,6 +291,8 @@ def _from_cloud(
     viewpoint: np.ndarray | None,
 ) -> ObjectModel:
     pts = check_coordinates(arr * scale if arr.size else arr)
+    if viewpoint is not None:
+        viewpoint = viewpoint * scale  # in the cloud's units, like its points
     if normals is not None:
         normals = as_array(normals, "normals").astype(float)
         if normals.shape != pts.shape or not np.isfinite(normals).all():
