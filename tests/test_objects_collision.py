@@ -71,6 +71,16 @@ def test_cloud_pieces_do_not_stray_outside_the_object():
     assert np.percentile(depth, 5) > -0.0015
 
 
+def test_cloud_slabs_of_a_thin_plate_stay_inside_it():
+    """A 2 mm plate: slabs 3 mm deep under one face would stand 1 mm out of the other, so
+    each slab is as deep as the wall under it (models.objects.collision.wall_thickness)."""
+    plate = trimesh.creation.box([0.06, 0.04, 0.002])
+    points, faces = trimesh.sample.sample_surface(plate, 4096, seed=1)
+    cloud = load_object(points, normals=plate.face_normals[faces])
+    vertices = np.vstack([p.vertices for p in cloud.collision_pieces()])
+    assert np.abs(vertices[:, 2]).max() < 0.001 + 1e-4
+
+
 def test_coacd_is_cached_by_content(tmp_path, monkeypatch):
     monkeypatch.setenv("DROGRASP_CACHE", str(tmp_path))
     knife = make_object("knife", 2)  # 300-odd faces: CoACD takes under a second

@@ -248,8 +248,9 @@ def cloud_pieces(
 ) -> list[trimesh.Trimesh]:
     """Fast approximate convex pieces of a surface cloud (a few tenths of a second for 20k points).
 
-    k-means groups nearby points; each group plus its copy pushed `thickness` inward along the
-    normals spans a convex slab under the surface. A slab with a probe point farther than
+    k-means groups nearby points; each group plus its copy pushed inward along the normals by
+    `thickness`, or by 80% of the wall under a point where that is thinner (`wall_thickness`: a
+    blade, a cup's wall), spans a convex slab under the surface. A slab with a probe point farther than
     `slack` plus twice the point spacing from the cloud, on the outer side of its nearest point,
     bridges a gap (a handle's hole, a mug's opening) and is split in two until it does not; so a
     piece pokes out of the object by at most about that distance, at concave places.
@@ -261,6 +262,7 @@ def cloud_pieces(
     spacing = float(np.median(tree.query(probe, k=2)[0][:, 1]))
     tol = slack + 2.0 * spacing
     rng = np.random.default_rng(seed)
+    walls = wall_thickness(pts, nrm, tree, thickness)
     k = int(min(clusters, max(1, len(pts) // min_points)))
     _, assign = kmeans2(pts, k, minit="++", iter=8, seed=rng)
     todo = [np.flatnonzero(assign == c) for c in range(k)]
@@ -269,7 +271,8 @@ def cloud_pieces(
         members = todo.pop()
         if len(members) < 4:
             continue
-        slab = np.vstack([pts[members], pts[members] - thickness * nrm[members]])
+        depth = np.minimum(thickness, walls[members])[:, None]
+        slab = np.vstack([pts[members], pts[members] - depth * nrm[members]])
         try:
             qhull = ConvexHull(slab)
         except QhullError:
@@ -281,6 +284,24 @@ def cloud_pieces(
             continue
         todo.extend(_split(pts[members], members))
     return accepted
+
+
+def wall_thickness(
+    pts: np.ndarray, normals: np.ndarray, tree: cKDTree, most: float, share: float = 0.8
+) -> np.ndarray:
+    """Per point, `share` of the distance to the wall's other sheet behind it (points within
+    `most` / `share` whose normals face the other way), capped at `most`: a slab no deeper
+    than that stays inside a scissors blade or a mug's wall instead of poking out of its far
+    side."""
+    reach = most / share
+    out = np.full(len(pts), most)
+    for i, near in enumerate(tree.query_ball_point(pts, reach)):
+        near = np.asarray(near)
+        behind = np.einsum("ij,j->i", pts[i] - pts[near], normals[i])
+        other = (normals[near] @ normals[i] < -0.5) & (behind > 1e-4)
+        if other.any():
+            out[i] = min(most, share * float(behind[other].min()))
+    return np.maximum(out, 0.25 * most)
 
 
 def _stays_in_object(
