@@ -32,7 +32,8 @@ turn per pair). `--view single` plans on what a depth camera sees from one viewp
 seen faces' labels) and validates the chosen grasps in MuJoCo against the full object; `--view
 cloud` does the same with 4096 random surface points (a complete scan, collision pieces made
 from the cloud, as for drograsp demo's clouds). Records go to OUT/records.jsonl as they finish,
-so an interrupted run resumes; OUT/summary.json, OUT/table.md and OUT/bars.png are written at the end.
+so an interrupted run resumes; OUT/summary.json, OUT/table.md and OUT/bars.png are written at
+the end.
 """
 
 from __future__ import annotations

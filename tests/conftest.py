@@ -6,7 +6,9 @@ from pathlib import Path
 
 import pytest
 
+from models.errors import ObjectError
 from models.hands import available_hands
+from models.objects.loading import import_open3d
 
 REFERENCE = Path(__file__).resolve().parents[1].parent / "shared" / "reference"
 HANDS = available_hands()
@@ -30,6 +32,6 @@ def needs_open3d() -> None:
     """Skip where Open3D cannot load its system libraries (libusb, libGL): single views are
     rendered with its ray casting, and a slim machine may lack them."""
     try:
-        import open3d  # noqa: F401
-    except (ImportError, OSError) as err:
-        pytest.skip(f"Open3D does not import here ({err}); apt-get install libusb-1.0-0 libgl1")
+        import_open3d("rendering single views")
+    except ObjectError as err:
+        pytest.skip(str(err))

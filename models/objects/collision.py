@@ -250,8 +250,8 @@ def cloud_pieces(
 
     k-means groups nearby points; each group plus its copy pushed inward along the normals by
     `thickness`, or by 80% of the wall under a point where that is thinner (`wall_thickness`: a
-    blade, a cup's wall), spans a convex slab under the surface. A slab with a probe point farther than
-    `slack` plus twice the point spacing from the cloud, on the outer side of its nearest point,
+    blade, a cup's wall), spans a convex slab under the surface. A slab with a probe point
+    farther than `slack` plus twice the point spacing from the cloud, on the outer side of its nearest point,
     bridges a gap (a handle's hole, a mug's opening) and is split in two until it does not; so a
     piece pokes out of the object by at most about that distance, at concave places.
     """
@@ -271,8 +271,7 @@ def cloud_pieces(
         members = todo.pop()
         if len(members) < 4:
             continue
-        depth = np.minimum(thickness, walls[members])[:, None]
-        slab = np.vstack([pts[members], pts[members] - depth * nrm[members]])
+        slab = np.vstack([pts[members], pts[members] - walls[members, None] * nrm[members]])
         try:
             qhull = ConvexHull(slab)
         except QhullError:
@@ -290,9 +289,9 @@ def wall_thickness(
     pts: np.ndarray, normals: np.ndarray, tree: cKDTree, most: float, share: float = 0.8
 ) -> np.ndarray:
     """Per point, `share` of the distance to the wall's other sheet behind it (points within
-    `most` / `share` whose normals face the other way), capped at `most`: a slab no deeper
-    than that stays inside a scissors blade or a mug's wall instead of poking out of its far
-    side."""
+    `most` / `share` whose normals face the other way), between a quarter of `most` and `most`:
+    a slab no deeper than that stays inside a scissors blade or a mug's wall instead of poking
+    out of its far side."""
     reach = most / share
     out = np.full(len(pts), most)
     for i, near in enumerate(tree.query_ball_point(pts, reach)):

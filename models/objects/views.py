@@ -15,7 +15,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from ..errors import ObjectError
-from .loading import import_open3d
+from .loading import import_open3d, load_object
 from .model import ObjectModel
 
 
@@ -90,8 +90,6 @@ def single_view_object(
 ) -> ObjectModel:
     """The single view as an ObjectModel cloud (normals estimated toward the camera); with
     `labelled`, the hit faces' part labels and the object's part names come along."""
-    from .loading import load_object
-
     points, labels, eye = single_view(obj, camera, seed)
     keep = labelled and labels is not None and obj.part_names
     return load_object(
@@ -110,8 +108,6 @@ def sampled_cloud_object(
     user's cloud (no viewpoint): the object as a complete scan or a simulator gives it, planned
     with collision pieces made from the cloud rather than from the mesh. With `labelled`, the
     samples' part labels and the object's part names come along."""
-    from .loading import load_object
-
     sample = obj.sample_cloud(points, seed)
     keep = labelled and sample.labels is not None and obj.part_names
     return load_object(
