@@ -111,6 +111,11 @@ class Record:
     candidates: int = 0
     plan_time: float = 0.0
     stage_times: dict[str, float] = field(default_factory=dict)
+    # every solved candidate (planner.results.CandidateResult.summary), with the proposal's
+    # anchors and anchor closure and, where validated and held, the part it touches on the
+    # labelled object ("touched") and whether it holds on the full object ("held_full"): what
+    # a validation order can be compared on afterwards (with schedule.validate_all=true)
+    candidate_summaries: list[dict] = field(default_factory=list)
     error: str = ""
 
     @property
@@ -208,6 +213,15 @@ def run_task(task: tuple) -> Record:
     rec.understood = result.instruction.text
     rec.candidates = len(result.candidates)
     rec.stage_times = {k: round(v, 4) for k, v in result.stage_times().items()}
+    for cand in result.candidates:
+        summary = cand.summary()
+        summary["anchor_quality"] = cand.proposal.anchor_quality
+        summary["shaped"] = cand.proposal.shaped
+        summary["anchors"] = np.round(cand.proposal.anchors, 4).tolist()
+        held_full = holds(cand) if cand.success else False
+        summary["held_full"] = held_full
+        summary["touched"] = touched_part(cand.grasp, obj, hand) if held_full else None
+        rec.candidate_summaries.append(summary)
     return rec
 
 

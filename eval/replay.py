@@ -48,6 +48,8 @@ REPLAYABLE = (
     "schedule.gate_solves",
     "schedule.sweep_after",
     "schedule.ranking",
+    "schedule.intent_first",
+    "schedule.intent_search",
     "proposals.max_proposals",
     "proposals.pinch_proposals",
 )

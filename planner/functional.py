@@ -29,12 +29,14 @@ from planner.grasp_program import GraspProgram, GraspTargets, SolveResult, grasp
 from planner.intent import check_configuration, faces_intent, intent_definition
 from planner.labels import grasp_part
 from planner.learned_proposer import (
+    REGION_PART,
     anchor_closure,
     as_drawn,
     direct_proposals,
     dro_targets,
     fitted,
     learned_proposals,
+    region_object,
 )
 from planner.model_proposer import HandGeometry, ModelProposer
 from planner.quality import contact_quality
@@ -209,10 +211,18 @@ class FunctionalPlanner:
             )
         # facing samples first, then best anchor closure; stable: sample order breaks ties
         proposals.sort(key=lambda p: (not p.shaped, -p.anchor_quality))
+        t0 = time.perf_counter()
+        if s.learned.region_proposals > 0 and s.learned.solver == "drake" and not direct:
+            proposals += self._region_proposals(obj, drawn.anchors, meaning)
+        region_time = time.perf_counter() - t0
         shaped_program, table_top = program, None
         if any(p.shaped for p in proposals):
             shaped_program, table_top = self._intent_program(obj, meaning)
-        times = {"build": time.perf_counter() - start - drawn_time, **drawn.times}
+        times = {
+            "build": time.perf_counter() - start - drawn_time - region_time,
+            "region": region_time,
+            **drawn.times,
+        }
         result = self._run(
             obj,
             instruction,
@@ -225,6 +235,20 @@ class FunctionalPlanner:
         result.understood = understood.to_dict()
         result.proposer = "direct" if direct else "learned"
         return result
+
+    def _region_proposals(
+        self, obj: ObjectModel, anchors: np.ndarray, meaning: Definition | None
+    ) -> list[Proposal]:
+        """The model-based proposer's proposals on the region the samples point at
+        (planner.learned_proposer.region_object), best `learned.region_proposals` of them. They
+        are shaped by the intent only where its definition needs no labels (Liftup): the
+        others name parts the region object does not have."""
+        region = region_object(obj, anchors)
+        if region is None:
+            return []
+        shape = meaning if meaning is not None and label_free(meaning.intent) else None
+        found = self.propose(region, REGION_PART, shape)
+        return found[: self.settings.learned.region_proposals]
 
     def _run(
         self,

@@ -32,6 +32,14 @@ from planner.results import Proposal
 # 1 cm: about 3 cm) enter the program; the rest are guesswork (learned.dro.closeness)
 MIN_CLOSENESS = 0.05
 
+# The region the samples point at (`pointed_region`): the samples whose anchor centres lie
+# within REGION_SPREAD of the densest one (kernel width REGION_BANDWIDTH), and the object points
+# within REGION_RADIUS of their anchors. The part name the model-based proposer plans on there.
+REGION_BANDWIDTH = 0.02  # m
+REGION_SPREAD = 0.05  # m
+REGION_RADIUS = 0.012  # m
+REGION_PART = "pointed"
+
 
 @dataclass
 class LearnedTargets:
@@ -81,6 +89,40 @@ def surface_at(obj: ObjectModel, points: np.ndarray) -> tuple[np.ndarray, np.nda
     """The object's cloud points nearest `points` (..., 3) and their normals, same shape."""
     nearest = cKDTree(obj.points).query(points.reshape(-1, 3))[1]
     return obj.points[nearest].reshape(points.shape), obj.normals[nearest].reshape(points.shape)
+
+
+def pointed_region(points: np.ndarray, anchors: np.ndarray) -> np.ndarray:
+    """Mask of `points` (N, 3) on the part most samples' anchors (n, 4, 3) point at.
+
+    A tenth of the samples land on another part (eval.interaction, part accuracy), so the
+    region follows the majority: the sample whose anchor centre has the most others near it,
+    and the samples near that one."""
+    finite = np.all(np.isfinite(anchors), axis=2)
+    centres = np.array([a[f].mean(axis=0) for a, f in zip(anchors, finite, strict=True)])
+    gap = np.linalg.norm(centres[:, None] - centres[None], axis=2)
+    density = np.exp(-((gap / REGION_BANDWIDTH) ** 2)).sum(axis=1)
+    members = gap[int(np.argmax(density))] <= REGION_SPREAD
+    near, _ = cKDTree(anchors[members][finite[members]]).query(points)
+    return near <= REGION_RADIUS
+
+
+def region_object(obj: ObjectModel, anchors: np.ndarray) -> ObjectModel | None:
+    """The object's surface points labelled REGION_PART where the samples point
+    (`pointed_region`) and "rest" elsewhere: what the model-based proposer plans on after the
+    samples (`LearnedSettings.region_proposals`). None where the region is too small to place
+    anchors on (8 points)."""
+    mask = pointed_region(obj.points, anchors)
+    if mask.sum() < 8:
+        return None
+    return ObjectModel(
+        name=obj.name,
+        cloud=obj.points,
+        cloud_normals=obj.normals,
+        cloud_labels=np.where(mask, 0, 1),
+        part_names=(REGION_PART, "rest"),
+        category=obj.category,
+        seed=obj.seed,
+    )
 
 
 def direct_proposals(

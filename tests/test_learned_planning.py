@@ -9,12 +9,14 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from scipy.spatial import cKDTree
 
 from learned.understand import named_intents, understand
 from models.errors import InstructionError, PlanningError
 from models.objects import load_object, make_object
 from planner import plan_grasp
 from planner.functional import FunctionalPlanner, PlannerSettings
+from planner.learned_proposer import pointed_region
 from planner.settings import LearnedSettings, ScheduleSettings
 from tests.tiny_models import TINY_INTERACTION
 
@@ -52,9 +54,11 @@ def test_an_unlabelled_cloud_and_a_sentence_are_planned(hand_name):
     result = plan_grasp(cloud, "hold the mug around its body", hand_name, settings)
     assert result.proposer == "learned"
     assert result.understood["understood_as"] == "Hold a mug by body"
-    assert 1 <= len(result.candidates) <= 4  # solved a batch at a time until one holds
-    assert all(c.proposal.kind == "learned" for c in result.candidates)
-    qualities = [c.proposal.anchor_quality for c in result.candidates]
+    assert 1 <= len(result.candidates)
+    samples = [c for c in result.candidates if c.proposal.kind == "learned"]
+    # the samples first, then (where they are used up) proposals on the region they point at
+    assert result.candidates[: len(samples)] == samples
+    qualities = [c.proposal.anchor_quality for c in samples]
     assert qualities == sorted(qualities, reverse=True)
     # D(R,O)'s point targets reach the program, with weights from its predicted closeness
     p = result.candidates[0].proposal
@@ -63,6 +67,41 @@ def test_an_unlabelled_cloud_and_a_sentence_are_planned(hand_name):
     validated = [c for c in result.candidates if c.order is not None]
     assert validated and all(c.part is None for c in validated)  # no labels: no part vote
     assert "interaction" in result.stage_times() and "dro" in result.stage_times()
+
+
+def test_the_region_follows_the_anchors_of_most_samples():
+    """Eleven samples on one end of a bar and three on the other: the region is the first end."""
+    points = np.column_stack([np.linspace(0, 0.3, 301), np.zeros(301), np.zeros(301)])
+    rng = np.random.default_rng(0)
+    majority = (0.05 + rng.normal(0, 0.004, (11, 4, 1))) * [1, 0, 0]
+    minority = (0.25 + rng.normal(0, 0.004, (3, 4, 1))) * [1, 0, 0]
+    minority[0, 3] = np.nan  # a pinch leaves its fourth finger free
+    region = pointed_region(points, np.concatenate([minority, majority]))
+    x = points[region, 0]
+    assert region.sum() > 10 and x.min() > 0.02 and x.max() < 0.09
+
+
+@pytest.mark.parametrize("hand_name", ["allegro", "leap", "shadow"])
+def test_after_the_samples_come_model_proposals_on_the_region_they_point_at(hand_name):
+    cloud = load_object(make_object("mug", 3).sample_cloud(4096).points)
+    settings = PlannerSettings(
+        schedule=ScheduleSettings(max_candidates=20),
+        learned=LearnedSettings(samples=4, region_proposals=3, dro=False),
+    )
+    planner = FunctionalPlanner(hand_name, settings)
+    # nothing holds: every proposal is solved, in order
+    planner._validate = lambda program, obj, instruction, cand: None
+    result = planner.plan(cloud, "grab the mug by its handle")
+    kinds = [c.proposal.kind for c in sorted(result.candidates, key=lambda c: c.rank)]
+    assert kinds[:4] == ["learned"] * 4 and len(kinds) == 7
+    assert set(kinds[4:]) <= {"row", "pinch", "palm"}
+    samples = np.concatenate([c.proposal.anchors for c in result.candidates[:4]])
+    region = pointed_region(cloud.points, samples.reshape(4, 4, 3))
+    inside = cKDTree(cloud.points[region])
+    for c in result.candidates[4:]:
+        used = np.all(np.isfinite(c.proposal.anchors), axis=1)
+        assert inside.query(c.proposal.anchors[used])[0].max() < 1e-9
+    assert "region" in result.stage_times()
 
 
 @pytest.mark.parametrize("hand_name", ["allegro", "leap", "shadow"])
