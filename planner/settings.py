@@ -24,11 +24,16 @@ class ScheduleSettings:
     """What is solved and validated, and in which order (planner.schedule)."""
 
     max_candidates: int = 8  # grasps validated at most (the costly step)
-    # proposals solved before the best of them are validated. With the anchor-closure order the
-    # first proposals are the likeliest to hold, so small batches waste fewer solves: on the 300
-    # test pairs 2 vs 4 gave the same returned rates, first-candidate 65/69/68% vs 70/70/68%
-    # and 6.3/7.8/7.9 vs 7.6/8.8/9.1 solves per returned grasp (1: 62/69/70%, 5.9/7.3/7.6).
-    solve_batch: int = 2
+    # proposals solved before the best of them are validated. A solved candidate's force
+    # closure predicts holding better than its proposal's rank (AUC 0.87 against 0.59 over the
+    # learned proposer's 2167 validated samples), so the first validation chooses among a few:
+    # replayed on every-candidate-validated records (with intent_first 0), the model-based
+    # planner's first candidate held for 78/70/64% of the 150 validation pairs at 4 against
+    # 74/60/64% at 2 and 76/68/64% at 8 (test: 80/76/68% at 4, 72/70/58% at 2), with the same
+    # returned and intent rates and 0.5-1 more solves a returned grasp; the learned samples'
+    # first held on the part 64/68/64% at 4 against 62/70/60% at 2 (docs/planner_log.md,
+    # "Validation order, again").
+    solve_batch: int = 4
     # epsilon below this: validated only when nothing better is left. Weak force closure
     # (0.02-0.1) mostly slips and used up the validations before a later batch's strong
     # candidates were reached (mug handles); 0.1 vs 0.02 on the 100 Allegro and LEAP test pairs
@@ -54,8 +59,14 @@ class ScheduleSettings:
     # way to another grasp (dataset generation keeps them all, see PlanResult.holding).
     validate_all: bool = False
     ranking: str = "task"  # validation order: "task" or "epsilon" (planner.quality)
-    # validations in which candidates meeting the intent go first; then by quality alone
-    intent_first: int = 4
+    # validations in which candidates meeting the intent go first; then by quality alone. Once
+    # a grasp holds on the part without meeting its intent only candidates meeting it are
+    # validated, so putting them first buys no intent: it only spends the first validations on
+    # candidates that slip more often (Liftup from above). Replayed on the 150 validation pairs
+    # (solve_batch 4), 0 vs 4: first candidate held 78/70/64% vs 60/58/56% (allegro/leap/
+    # shadow), held on the part and meeting the intent 52/64/66% vs 52/68/64%, returned
+    # 98/98/96% both.
+    intent_first: int = 0
     # after a grasp held on the part but missed its intent: proposals solved at most to find
     # one that meets it (None: all of them). On the 150 test pairs of `--objects-per-category
     # 1`, 4 gave 65/49/66% (allegro/leap/shadow) of the grasps held on the part meeting their

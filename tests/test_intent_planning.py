@@ -127,15 +127,27 @@ def _fake(monkeypatch, intent_ok, holds) -> None:
     )
 
 
-def test_candidates_meeting_the_intent_are_validated_first(monkeypatch, mug):
+def test_candidates_meeting_the_intent_are_validated_first_where_asked(monkeypatch, mug):
     _fake(monkeypatch, intent_ok=lambda r: r >= 2, holds=lambda r: True)
     settings = PlannerSettings(
-        schedule=ScheduleSettings(solve_batch=4, sweep_after=None),
+        schedule=ScheduleSettings(solve_batch=4, sweep_after=None, intent_first=4),
         proposals=ProposalSettings(max_proposals=8),
     )
     result = FunctionalPlanner("allegro", settings).plan(mug, "Liftup a mug by handle")
     assert result.success and result.intent_ok
     assert result.best.rank == 2 and result.best.order == 0
+
+
+def test_by_default_the_best_goes_first_and_a_hold_off_intent_keeps_the_search(monkeypatch, mug):
+    """intent_first 0: the best candidate is validated first whatever its intent; once it holds
+    without meeting the intent only candidates meeting it are validated, and one that holds
+    is returned."""
+    _fake(monkeypatch, intent_ok=lambda r: r >= 2, holds=lambda r: True)
+    settings = PlannerSettings(proposals=ProposalSettings(max_proposals=8))
+    result = FunctionalPlanner("allegro", settings).plan(mug, "Liftup a mug by handle")
+    validated = sorted((c for c in result.candidates if c.order is not None), key=lambda c: c.order)
+    assert [c.rank for c in validated] == [0, 2]
+    assert result.success and result.intent_ok and result.best.rank == 2
 
 
 def test_an_off_intent_grasp_is_returned_with_a_note_when_nothing_else_holds(monkeypatch, mug):

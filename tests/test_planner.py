@@ -86,14 +86,14 @@ def test_settings_overrides_by_dotted_key():
         base,
         {
             "protocol": "dexgraspbench",
-            "schedule.solve_batch": 4,
+            "schedule.solve_batch": 3,
             "intent.aware": False,
             "learned.solver": "fit",  # needs learned.dro, set with it: one replace per group
             "learned.dro": True,
             "program.major_iterations": 60,
         },
     )
-    assert (s.protocol, s.schedule.solve_batch, s.intent.aware) == ("dexgraspbench", 4, False)
+    assert (s.protocol, s.schedule.solve_batch, s.intent.aware) == ("dexgraspbench", 3, False)
     assert (s.learned.solver, s.learned.dro, s.program.major_iterations) == ("fit", True, 60)
     assert s.schedule.max_candidates == base.schedule.max_candidates  # the rest unchanged
     assert with_overrides(base, {}) is base
