@@ -223,6 +223,9 @@ class FunctionalPlanner:
             "region": region_time,
             **drawn.times,
         }
+        voter = None
+        if part is None and s.learned.region_vote > 0 and not direct:
+            voter = region_object(obj, drawn.anchors, s.learned.region_vote, 1)
         result = self._run(
             obj,
             instruction,
@@ -231,6 +234,7 @@ class FunctionalPlanner:
             proposals,
             (program, shaped_program, table_top),
             times,
+            voter,
         )
         result.understood = understood.to_dict()
         result.proposer = "direct" if direct else "learned"
@@ -259,10 +263,13 @@ class FunctionalPlanner:
         proposals: list[Proposal],
         programs: tuple[GraspProgram, GraspProgram, float | None],
         times: dict[str, float],
+        voter: ObjectModel | None = None,
     ) -> PlanResult:
         """Solve, schedule and validate the proposals (planner.schedule). `programs`: the
         program, the one for proposals shaped by the intent, and that one's table top; `times`
-        (building and proposing) go to the first candidate. `part` None: any part counts."""
+        (building and proposing) go to the first candidate. `part` None: any part counts,
+        unless `voter` (the region the learned samples point at, `learned.region_vote`) says
+        which held grasps count first; the candidates' `part` stays None."""
         notes = []
         program, shaped_program, table_top = programs
 
@@ -285,9 +292,20 @@ class FunctionalPlanner:
 
         def validate(cand: CandidateResult) -> None:
             self._validate(program_of(cand.rank), obj, instruction, cand)
+            if voter is not None:
+                cand.part = grasp_part(self.hand, cand.solve.wrist, cand.solve.q, voter)
 
-        scheduled = run_schedule(len(proposals), solve, validate, part, self.settings)
+        wanted = REGION_PART if voter is not None else part
+        scheduled = run_schedule(len(proposals), solve, validate, wanted, self.settings)
         candidates = scheduled.candidates
+        if voter is not None:
+            if scheduled.on_part is None and scheduled.fallback is not None:
+                notes.append(
+                    "no holding grasp touched the region the samples point at; returning one "
+                    "elsewhere on the object"
+                )
+            for cand in candidates:
+                cand.part = None
         if scheduled.on_part is not None:
             chosen = scheduled.on_part
             if scheduled.found is None:
@@ -299,9 +317,11 @@ class FunctionalPlanner:
             return PlanResult(instruction, self.hand.name, chosen.grasp, candidates, notes)
         fallback = scheduled.fallback
         if fallback is not None:
-            notes.append(
-                f"no holding grasp touched the {part}; returning one that touches {fallback.part}"
-            )
+            if voter is None:
+                notes.append(
+                    f"no holding grasp touched the {part}; returning one that touches "
+                    f"{fallback.part}"
+                )
             return PlanResult(instruction, self.hand.name, fallback.grasp, candidates, notes)
         return PlanResult(instruction, self.hand.name, None, candidates, notes)
 

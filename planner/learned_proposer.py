@@ -96,31 +96,42 @@ def surface_at(obj: ObjectModel, points: np.ndarray) -> tuple[np.ndarray, np.nda
     return obj.points[nearest].reshape(points.shape), obj.normals[nearest].reshape(points.shape)
 
 
-def pointed_region(points: np.ndarray, anchors: np.ndarray) -> np.ndarray:
+def pointed_region(
+    points: np.ndarray,
+    anchors: np.ndarray,
+    radius: float = REGION_RADIUS,
+    votes: int = REGION_VOTES,
+) -> np.ndarray:
     """Mask of `points` (N, 3) on the part most samples' anchors (n, 4, 3) point at.
 
     A tenth of the samples land on another part (eval.interaction, part accuracy), so the
     region follows the majority: the sample whose anchor centre has the most others near it,
     the samples near that one, and the points near the anchors of at least two of them (one
-    sample's stray finger does not widen it onto the next part)."""
+    sample's stray finger does not widen it onto the next part). `radius` and `votes`: how
+    near the anchors of how many of them."""
     finite = np.all(np.isfinite(anchors), axis=2)
     centres = np.array([a[f].mean(axis=0) for a, f in zip(anchors, finite, strict=True)])
     gap = np.linalg.norm(centres[:, None] - centres[None], axis=2)
     density = np.exp(-((gap / REGION_BANDWIDTH) ** 2)).sum(axis=1)
     members = np.flatnonzero(gap[int(np.argmax(density))] <= REGION_SPREAD)
-    votes = np.zeros(len(points), dtype=int)
+    count = np.zeros(len(points), dtype=int)
     for m in members:
         near, _ = cKDTree(anchors[m][finite[m]]).query(points)
-        votes += near <= REGION_RADIUS
-    return votes >= min(REGION_VOTES, len(members))
+        count += near <= radius
+    return count >= min(votes, len(members))
 
 
-def region_object(obj: ObjectModel, anchors: np.ndarray) -> ObjectModel | None:
+def region_object(
+    obj: ObjectModel,
+    anchors: np.ndarray,
+    radius: float = REGION_RADIUS,
+    votes: int = REGION_VOTES,
+) -> ObjectModel | None:
     """The object's surface points labelled REGION_PART where the samples point
     (`pointed_region`) and "rest" elsewhere: what the model-based proposer plans on after the
     samples (`LearnedSettings.region_proposals`). None where the region is too small to place
     anchors on (8 points)."""
-    mask = pointed_region(obj.points, anchors)
+    mask = pointed_region(obj.points, anchors, radius, votes)
     if mask.sum() < 8:
         return None
     return ObjectModel(

@@ -200,6 +200,11 @@ class LearnedSettings:
     # proposer often finds a grasp on the same region. Solved by the grasp program, so not
     # with solver "fit" (the ablation without Drake).
     region_proposals: int = 8
+    # m; 0: off. On an object without the instruction's part labelled, a grasp that holds
+    # counts for the instruction only where its fingertips vote (planner.labels) for the points
+    # within this distance of the majority's anchors (pointed_region, one sample enough); one
+    # that holds elsewhere is returned only when none does.
+    region_vote: float = 0.0
 
     def __post_init__(self) -> None:
         if self.solver not in LEARNED_SOLVERS:
