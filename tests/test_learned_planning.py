@@ -104,6 +104,39 @@ def test_after_the_samples_come_model_proposals_on_the_region_they_point_at(hand
     assert "region" in result.stage_times()
 
 
+def test_with_a_region_vote_a_grasp_off_the_region_is_passed_over(monkeypatch):
+    """Every grasp holds; the first one's fingertips vote off the region the samples point
+    at, so the search goes on and the next one, on the region, is returned."""
+    from planner import functional
+    from planner.learned_proposer import REGION_PART
+
+    cloud = load_object(make_object("mug", 3).sample_cloud(4096).points)
+    settings = PlannerSettings(
+        schedule=ScheduleSettings(max_candidates=4, solve_batch=1),
+        learned=LearnedSettings(samples=6, region_proposals=0, dro=False, region_vote=0.02),
+    )
+    planner = FunctionalPlanner("allegro", settings)
+
+    def holds(program, obj, instruction, cand):
+        cand.grasp, cand.success, cand.part = object(), True, None
+
+    voted = []
+
+    def vote(hand, wrist, q, obj):
+        assert set(obj.part_names) == {REGION_PART, "rest"}
+        voted.append(REGION_PART if voted else "rest")
+        return voted[-1]
+
+    planner._validate = holds
+    monkeypatch.setattr(functional, "grasp_part", vote)
+    result = planner.plan(cloud, "hold the mug by its handle")
+    validated = sorted((c for c in result.candidates if c.order is not None), key=lambda c: c.order)
+    assert voted == ["rest", REGION_PART] and len(validated) == 2
+    assert result.best is validated[1]
+    assert all(c.part is None for c in result.candidates)  # no labels: no part reported
+    assert not any("region" in n for n in result.notes)
+
+
 @pytest.mark.parametrize("hand_name", ["allegro", "leap", "shadow"])
 def test_the_direct_ablation_validates_its_samples_as_drawn(hand_name, monkeypatch):
     """proposer="direct": wrist and joints from one diffusion model (here an untrained small
