@@ -179,7 +179,9 @@ def replay_pair(record: PairRecord, settings: PlannerSettings) -> PairRecord:
     scheduled = run_schedule(
         count, lambda i: _candidate(recorded[i]), validate, record.part, settings
     )
-    returned = scheduled.found or scheduled.fallback
+    # what planning returns: a grasp held on the part (meeting the intent if one does), else
+    # one held elsewhere
+    returned = scheduled.on_part or scheduled.fallback
     first = next((c for c in scheduled.candidates if c.order == 0), None)
     used = scheduled.candidates
     plan_time = sum(
@@ -196,7 +198,8 @@ def replay_pair(record: PairRecord, settings: PlannerSettings) -> PairRecord:
         first_holds=bool(first and first.success),
         first_part_ok=bool(first and first.success and first.part == record.part),
         returned_holds=returned is not None,
-        part_ok=scheduled.found is not None,
+        part_ok=scheduled.on_part is not None,
+        intent_ok=None if scheduled.on_part is None else scheduled.found is not None,
         candidates=len(used),
         solve_times=[c.solve.solve_time for c in used],
         plan_time=plan_time,

@@ -51,6 +51,9 @@ def test_replay_of_all_validated_records_is_the_plan(hand_name, tmp_path):
     replayed = replay_pair(record, small)
     assert replayed.candidates == len(planned.candidates)
     assert replayed.returned_holds == planned.success
+    # held on the part, as eval.planner_benchmark counts it (meeting the intent or not)
+    assert replayed.part_ok == (planned.success and planned.part_touched == "handle")
+    assert replayed.intent_ok == (bool(planned.intent_ok) if replayed.part_ok else None)
     first = next((c for c in planned.candidates if c.order == 0), None)
     assert replayed.first_holds == bool(first and first.success)
 
