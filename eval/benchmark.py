@@ -188,23 +188,25 @@ def run_task(task: tuple) -> Record:
         return rec
     hand = planner.hand
 
-    def holds(cand) -> bool:
-        """Held in planning, and (planned on a cloud or a view) against the full object too."""
-        if cand is None or not cand.success:
-            return False
-        if view == "full":
-            return True
-        return bool(
+    def judged(cand) -> tuple[bool, str | None]:
+        """Held in planning and (planned on a cloud or a view) against the full object too,
+        and then the part it touches on the labelled object."""
+        if not cand.success:
+            return False, None
+        held = view == "full" or bool(
             validate(cand.grasp, obj.collision_pieces(), hand, planner.settings.protocol).success
         )
+        return held, touched_part(cand.grasp, obj, hand) if held else None
 
+    # each held candidate judged once: the first, the returned one and the records use it
+    verdicts = {c.rank: judged(c) for c in result.candidates}
     first = next((c for c in result.candidates if c.order == 0), None)
-    rec.first_ok = holds(first) and touched_part(first.grasp, obj, hand) == part
+    rec.first_ok = first is not None and verdicts[first.rank] == (True, part)
     best = result.best
     rec.planned = bool(result.success)
-    rec.held = rec.planned and holds(best)
+    rec.held = rec.planned and verdicts[best.rank][0]
     if rec.held:
-        rec.part_touched = touched_part(result.grasp, obj, hand)
+        rec.part_touched = verdicts[best.rank][1]
         rec.returned_ok = rec.part_touched == part
     if rec.returned_ok:
         wrist = np.concatenate([result.grasp.wrist_pos, result.grasp.wrist_quat])
@@ -218,9 +220,7 @@ def run_task(task: tuple) -> Record:
         summary["anchor_quality"] = cand.proposal.anchor_quality
         summary["shaped"] = cand.proposal.shaped
         summary["anchors"] = np.round(cand.proposal.anchors, 4).tolist()
-        held_full = holds(cand) if cand.success else False
-        summary["held_full"] = held_full
-        summary["touched"] = touched_part(cand.grasp, obj, hand) if held_full else None
+        summary["held_full"], summary["touched"] = verdicts[cand.rank]
         rec.candidate_summaries.append(summary)
     return rec
 
