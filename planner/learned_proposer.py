@@ -37,8 +37,9 @@ MIN_CLOSENESS = 0.05
 # within REGION_RADIUS of the anchors of REGION_VOTES of them. On the 150 validation pairs'
 # samples (16 each) the region's points lay on the instructed part for 89% on average at 6 mm
 # and 2 votes, against 81% at 12 mm and 1 vote (where a handle's region took in the body
-# beside it); smaller or with more votes, no better. REGION_PART: what the model-based
-# proposer is told the part is called.
+# beside it; counted once from eval.benchmark's records, docs/learned_log.md); smaller or
+# with more votes, no better. REGION_PART: what the model-based proposer is told the part is
+# called.
 REGION_BANDWIDTH = 0.02  # m
 REGION_SPREAD = 0.05  # m
 REGION_RADIUS = 0.006  # m

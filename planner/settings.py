@@ -26,7 +26,8 @@ class ScheduleSettings:
     max_candidates: int = 8  # grasps validated at most (the costly step)
     # proposals solved before the best of them are validated. A solved candidate's force
     # closure predicts holding better than its proposal's rank (AUC 0.87 against 0.59 over the
-    # learned proposer's 2167 validated samples), so the first validation chooses among a few:
+    # learned proposer's 2167 validated samples, counted once from eval.benchmark's records:
+    # docs/learned_log.md), so the first validation chooses among a few:
     # replayed on every-candidate-validated records (with intent_first 0), the model-based
     # planner's first candidate held for 78/70/64% of the 150 validation pairs at 4 against
     # 74/60/64% at 2 and 76/68/64% at 8 (test: 80/76/68% at 4, 72/70/58% at 2), with the same
