@@ -360,3 +360,33 @@ def test_relabel_learns_each_grasp_under_every_intent_it_meets() -> None:
     unchecked = GraspArrays("train", arrays | {"intents_met": np.full((5, 4), -1)}, meta)
     with pytest.raises(DatasetError, match="check-intents"):
         training_pairs(unchecked, relabel=True)
+
+
+def test_rows_are_counted_by_their_anchors_on_the_instructed_part(tmp_path: Path) -> None:
+    from learned.dataset import GraspArrays
+    from learned.train_interaction import ObjectPoints, anchors_on_part
+
+    mug = make_object("mug", 3)
+    handle = mug.points[mug.point_labels == mug.part_names.index("handle")]
+    body = mug.points[mug.point_labels == mug.part_names.index("body")]
+    anchors = np.stack(
+        [
+            handle[:4],  # all four on the handle
+            np.concatenate([handle[:3], body[:1]]),  # three
+            np.concatenate([handle[:2], body[:2]]),  # two
+            body[:4],  # none on the handle, all on the body
+        ]
+    )
+    meta = {"categories": ["mug"], "parts": ["body", "handle", "spout"]}
+    arrays = {
+        "category": np.zeros(5, dtype=int),
+        "seed": np.full(5, 3),
+        "part": np.array([1, 1, 1, 1, 2]),  # the last names a part the mug does not have
+        "anchors": np.concatenate([anchors, body[None, :4]]).astype(np.float32),
+        "hand": np.zeros(5, dtype=int),
+    }
+    data = GraspArrays("train", arrays, meta)
+    cache = ObjectPoints(tmp_path, 2048, 2)
+    counts = anchors_on_part(data, np.arange(5), cache)
+    assert counts.tolist() == [4, 3, 2, 0, 4]
+    assert anchors_on_part(data, np.array([3, 0]), cache).tolist() == [0, 4]

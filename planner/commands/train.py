@@ -78,6 +78,14 @@ def register(sub: argparse._SubParsersAction) -> None:
         "check-intents DIR` first); with --all-rows, grasps meeting none under their own",
     )
     i.add_argument(
+        "--anchors-on-part",
+        type=non_negative_int,
+        default=3,
+        metavar="N",
+        help="learn only from grasps with at least N of their 4 anchors on the instructed part "
+        "(default 3; 0 keeps every grasp)",
+    )
+    i.add_argument(
         "--install",
         action="store_true",
         help="copy the final weights to learned/weights/ (the shipped model)",
@@ -159,6 +167,7 @@ def interaction_setup(args: argparse.Namespace):
         generic_share=args.generic_share,
         all_rows=args.all_rows,
         relabel=args.relabel,
+        anchors_on_part=args.anchors_on_part,
     )
     return config, settings
 
