@@ -390,3 +390,25 @@ def test_rows_are_counted_by_their_anchors_on_the_instructed_part(tmp_path: Path
     counts = anchors_on_part(data, np.arange(5), cache)
     assert counts.tolist() == [4, 3, 2, 0, 4]
     assert anchors_on_part(data, np.array([3, 0]), cache).tolist() == [0, 4]
+
+
+def test_interaction_benchmark_scores_the_splits_own_anchors_as_it_scores_samples() -> None:
+    from eval.interaction import data_part_accuracy
+    from learned.dataset import GraspArrays
+
+    mug = make_object("mug", 3)
+    handle = mug.points[mug.point_labels == mug.part_names.index("handle")]
+    body = mug.points[mug.point_labels == mug.part_names.index("body")]
+    anchors = np.stack([handle[:4], np.concatenate([handle[:2], body[:2]]), body[:4]])
+    meta = {"categories": ["mug"], "parts": ["body", "handle"], "hands": ["allegro", "leap"]}
+    arrays = {
+        "category": np.zeros(3, dtype=int),
+        "seed": np.full(3, 3),
+        "part": np.array([1, 1, 0]),  # handle, handle (two anchors on it), body
+        "anchors": anchors,
+        "hand": np.array([0, 0, 1]),
+    }
+    data = GraspArrays("test", arrays, meta)
+    shares = data_part_accuracy(data, [("mug", 3)], ["allegro", "leap"])
+    assert shares == {"allegro": 0.5, "leap": 1.0, "all": pytest.approx(2 / 3)}
+    assert data_part_accuracy(data, [("mug", 4)], ["allegro"]) == {}
