@@ -46,6 +46,7 @@ _RANGES: dict[str, dict[str, tuple[float | None, float | None]]] = {
     "learned": {
         "samples": (1, None),
         "guidance": (0.0, None),
+        "sample_steps": (1, None),
         "seed": (0, None),
     },
     "program": {

@@ -159,7 +159,13 @@ class FunctionalPlanner:
         t0 = time.perf_counter()
         if direct:
             drawn = direct_proposals(
-                obj, text, self.hand, s.learned.samples, s.learned.seed, s.learned.guidance
+                obj,
+                text,
+                self.hand,
+                s.learned.samples,
+                s.learned.seed,
+                s.learned.guidance,
+                s.learned.sample_steps,
             )
         else:
             drawn = learned_proposals(
@@ -170,6 +176,7 @@ class FunctionalPlanner:
                 s.learned.seed,
                 s.learned.guidance,
                 s.learned.interaction_weights,
+                s.learned.sample_steps,
             )
         drawn_time = time.perf_counter() - t0
         proposals = []

@@ -76,16 +76,18 @@ def learned_proposals(
     seed: int = 0,
     guidance: float | None = None,
     weights: str | None = None,
+    steps: int | None = None,
 ) -> LearnedProposals:
     """`samples` interaction samples for the object's cloud, the sentence and the hand, each
     with its anchors' surface normals. D(R,O)'s targets are made per sample when it is solved
     (`dro_targets`): most plans end after a few solves, and D(R,O) costs 0.1-0.6 s a sample.
-    `weights`: a folder of interaction weights (None: the shipped model)."""
+    `weights`: a folder of interaction weights (None: the shipped model); `steps`: DDIM steps
+    (None: the model's own)."""
     from learned.interaction import load_model
 
     t0 = time.perf_counter()
     model = load_model(weights)
-    wrists, anchors = model.sample(obj.points, text, hand, samples, guidance, seed=seed)
+    wrists, anchors = model.sample(obj.points, text, hand, samples, guidance, steps, seed=seed)
     times = {"interaction": time.perf_counter() - t0}
     _, normals = surface_at(obj, anchors)
     return LearnedProposals(wrists, anchors, normals, times)
@@ -153,6 +155,7 @@ def direct_proposals(
     samples: int,
     seed: int = 0,
     guidance: float | None = None,
+    steps: int | None = None,
 ) -> LearnedProposals:
     """`samples` [wrist, joints] drawn by the direct-diffusion model for the cloud, sentence and
     hand. Its anchors are the object points nearest the anchor fingertips, so the samples are
@@ -163,7 +166,9 @@ def direct_proposals(
 
     t0 = time.perf_counter()
     model = load_model(name=DIRECT_NAME)
-    wrists, q = model.sample_configurations(obj.points, text, hand, samples, guidance, seed=seed)
+    wrists, q = model.sample_configurations(
+        obj.points, text, hand, samples, guidance, steps, seed=seed
+    )
     times = {"direct": time.perf_counter() - t0}
     tips = hand.fingertip_positions(
         torch.tensor(wrists), torch.tensor(q), list(hand.meta.anchor_fingers)

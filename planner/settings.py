@@ -194,6 +194,7 @@ class LearnedSettings:
     solver: str = "drake"
     seed: int = 0  # the samples' seed: the same seed, the same proposals
     guidance: float | None = None  # classifier-free guidance; None: the model's own
+    sample_steps: int | None = None  # DDIM steps per sample; None: the model's own
     # model-based proposals (planner.model_proposer) on the region the samples' anchors point
     # at (planner.learned_proposer.pointed_region), solved after the samples: at most this
     # many (0: none). The samples alone hold on the part within 8 validations no more often
