@@ -591,6 +591,7 @@ def train(
     if settings.anchors_on_part != TrainSettings.anchors_on_part:
         target += f" --anchors-on-part {settings.anchors_on_part}"
     name = config.name
+    steps = "" if settings.max_steps is None else f" --steps {settings.max_steps}"
     final.net.load_state_dict(ema)
     names = " ".join(map(str, data)) if not isinstance(data, str | Path) else str(data)
     final.info = {
@@ -601,8 +602,8 @@ def train(
         "seed": settings.seed,
         "final_loss": float(np.mean([h["loss"] for h in history[-50:]])) if history else None,
         "val_loss": next((h["val"] for h in reversed(history) if "val" in h), None),
-        "command": f"drograsp train interaction{target} --data {names} --out {out} --minutes "
-        f"{settings.minutes:g} --seed {settings.seed}",
+        "command": f"drograsp train interaction{target} --data {names} --out {out}{steps} "
+        f"--minutes {settings.minutes:g} --seed {settings.seed}",
     }
     final.save(str(out))
     if install:

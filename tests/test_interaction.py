@@ -294,6 +294,7 @@ def test_joints_target_trains_saves_as_direct_and_samples_configurations(tmp_pat
     assert result.weights.name == "direct.safetensors" and result.weights.is_file()
     model = InteractionModel.load(str(out), "direct")
     assert model.config.target == "joints" and "--target joints" in model.info["command"]
+    assert "--steps 2 " in model.info["command"]
     shadow = load_hand("shadow")
     cloud = make_object("mug", 3).points
     wrists, q = model.sample_configurations(cloud, "Use a mug by handle", shadow, 3)
