@@ -157,26 +157,12 @@ class FunctionalPlanner:
         facing = meaning is not None and bool(WRIST_CRITERIA & set(meaning.criteria))
         program = grasp_program(self.hand, obj.collision_pieces(), s.program)
         t0 = time.perf_counter()
+        drawing = (obj, text, self.hand, s.learned.samples, s.learned.seed, s.learned.guidance)
         if direct:
-            drawn = direct_proposals(
-                obj,
-                text,
-                self.hand,
-                s.learned.samples,
-                s.learned.seed,
-                s.learned.guidance,
-                s.learned.sample_steps,
-            )
+            drawn = direct_proposals(*drawing, steps=s.learned.sample_steps)
         else:
             drawn = learned_proposals(
-                obj,
-                text,
-                self.hand,
-                s.learned.samples,
-                s.learned.seed,
-                s.learned.guidance,
-                s.learned.interaction_weights,
-                s.learned.sample_steps,
+                *drawing, weights=s.learned.interaction_weights, steps=s.learned.sample_steps
             )
         drawn_time = time.perf_counter() - t0
         proposals = []
