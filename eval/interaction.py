@@ -50,7 +50,7 @@ from learned.interaction import (
     snap_to_cloud,
 )
 from learned.paraphrase import eval_paraphrases, request_of
-from learned.train_interaction import ObjectPoints, random_rotation, usable_rows
+from learned.train_interaction import ObjectPoints, anchors_on_part, random_rotation, usable_rows
 from models.hands import available_hands, load_hand
 from models.objects import instructions, make_object
 from models.objects.cache import cache_dir
@@ -284,37 +284,29 @@ def run(
                         )
                     )
     report.summaries = summarise(report.groups, hands)
-    report.data_part_accuracy = data_part_accuracy(split_data, objects, hands)
+    report.data_part_accuracy = data_part_accuracy(split_data, objects, hands, cache)
     report.summaries += timing(model, hands)
     return report
 
 
 def data_part_accuracy(
-    split_data, objects: list[tuple[str, int]], hands: list[str]
+    split_data, objects: list[tuple[str, int]], hands: list[str], cache: ObjectPoints
 ) -> dict[str, float]:
     """Per hand of `hands` and "all": the share of the split's grasps on `objects` with >= 3
-    of their 4 anchors on the instructed part (scored as the samples are)."""
+    of their 4 anchors on the instructed part (counted as training curates its rows,
+    `learned.train_interaction.anchors_on_part`)."""
     a, meta = split_data.arrays, split_data.meta
-    wanted = set(objects)
-    hits: dict[str, list[bool]] = defaultdict(list)
-    for cat, seed in sorted(wanted):
-        rows = np.flatnonzero(
-            (np.asarray(meta["categories"])[a["category"]] == cat) & (a["seed"] == seed)
-        )
-        if len(rows) == 0:
-            continue
-        obj = make_object(cat, seed)
-        tree = cKDTree(obj.points)
-        for r in rows:
-            part = meta["parts"][a["part"][r]]
-            hand = meta["hands"][a["hand"][r]]
-            if part not in obj.part_names or hand not in hands:
-                continue
-            near = obj.point_labels[tree.query(a["anchors"][r].reshape(-1, 3))[1]]
-            ok = bool((near == obj.part_names.index(part)).sum() >= 3)
-            hits[hand].append(ok)
-            hits["all"].append(ok)
-    return {h: float(np.mean(hits[h])) for h in [*hands, "all"] if hits[h]}
+    hand_names = np.asarray(meta["hands"])[a["hand"]]
+    wanted = {(c, int(s)) for c, s in objects}
+    on_objects = [
+        (meta["categories"][c], int(s)) in wanted
+        for c, s in zip(a["category"], a["seed"], strict=True)
+    ]
+    rows = np.flatnonzero(np.asarray(on_objects, dtype=bool) & np.isin(hand_names, hands))
+    ok = anchors_on_part(split_data, rows, cache) >= 3
+    shares = {h: ok[hand_names[rows] == h] for h in hands}
+    shares["all"] = ok
+    return {h: float(np.mean(v)) for h, v in shares.items() if len(v)}
 
 
 def summarise(groups: list[GroupResult], hands: list[str]) -> list[Summary]:

@@ -393,9 +393,12 @@ def test_rows_are_counted_by_their_anchors_on_the_instructed_part(tmp_path: Path
     assert anchors_on_part(data, np.array([3, 0]), cache).tolist() == [0, 4]
 
 
-def test_interaction_benchmark_scores_the_splits_own_anchors_as_it_scores_samples() -> None:
+def test_interaction_benchmark_scores_the_splits_own_anchors_as_it_scores_samples(
+    tmp_path: Path,
+) -> None:
     from eval.interaction import data_part_accuracy
     from learned.dataset import GraspArrays
+    from learned.train_interaction import ObjectPoints
 
     mug = make_object("mug", 3)
     handle = mug.points[mug.point_labels == mug.part_names.index("handle")]
@@ -410,6 +413,7 @@ def test_interaction_benchmark_scores_the_splits_own_anchors_as_it_scores_sample
         "hand": np.array([0, 0, 1]),
     }
     data = GraspArrays("test", arrays, meta)
-    shares = data_part_accuracy(data, [("mug", 3)], ["allegro", "leap"])
+    cache = ObjectPoints(tmp_path, 2048, 1)
+    shares = data_part_accuracy(data, [("mug", 3)], ["allegro", "leap"], cache)
     assert shares == {"allegro": 0.5, "leap": 1.0, "all": pytest.approx(2 / 3)}
-    assert data_part_accuracy(data, [("mug", 4)], ["allegro"]) == {}
+    assert data_part_accuracy(data, [("mug", 4)], ["allegro"], cache) == {}
