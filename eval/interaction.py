@@ -11,8 +11,9 @@ For every object of a split, every instruction of its category's table and every
 - palm outside: the palm centre (hand.json's palm) outside the object's mesh;
 - diversity: mean pairwise wrist distance of the 8 samples, beside the dataset's own spread for
   the same (object, instruction, hand) where it has two or more grasps;
-- the data's own part accuracy: the split's grasps scored as the samples are (a model that
-  reproduced its data would score this);
+- the data's own part accuracy: the split's grasps with >= 3 anchors on the part, counted as
+  training curates its rows (on each object's cached points); a model that reproduced its data
+  would score about this;
 - time: median wall time of `sample(cloud, text, hand, 8)` on one thread.
 
 The baseline returns the training grasps of the most similar instruction embedding and object
