@@ -80,6 +80,11 @@ class TrainSettings:
     # The dataset's anchors meet 3 of 4 on 92% of its test rows, and a model trained on every
     # row met it on 91.6% of its samples: it learned the rows' misses too (docs/learned_log.md)
     anchors_on_part: int = 3
+    # sampling weight (x the balance weight) of the grasps learned under their own instruction
+    # although they miss its intent (intent_ok 0; kept only with `all_rows`): below 1 they
+    # still teach where the parts are, less often than the grasps that meet the intent teach
+    # what the intent asks
+    unmet_weight: float = 1.0
     samples_per_object: int = 4  # cached 2048-point samples per object
     checkpoint_minutes: float = 3.0
     threads: int = 1
@@ -198,6 +203,20 @@ def training_pairs(
     return np.asarray(rows, dtype=np.int64), texts
 
 
+def unmet_intent(data: GraspArrays, rows: np.ndarray, texts: list[str]) -> np.ndarray:
+    """Per (row, text) pair: the grasp is learned under its own instruction and misses that
+    instruction's intent (intent_ok 0); False where the intent was never checked."""
+    ok = data.arrays.get("intent_ok")
+    if ok is None:
+        return np.zeros(len(rows), dtype=bool)
+    own = data.meta["instructions"]
+    same = np.array(
+        [own[i] == t for i, t in zip(data.arrays["instruction"][rows], texts, strict=True)],
+        dtype=bool,
+    )
+    return same & (np.asarray(ok)[rows] == 0)
+
+
 def anchors_on_part(data: GraspArrays, rows: np.ndarray, cache: ObjectPoints) -> np.ndarray:
     """Per row: how many of its 4 anchors lie on its instructed part (the part label of the
     nearest of the object's cached points); 4 where the part is not one of the object's."""
@@ -273,6 +292,11 @@ class Batcher:
         self.instr_index = np.array([self.instr_names.index(t) for t in instr])
         counts = np.bincount(self.instr_index, minlength=len(self.instr_names))
         weights = counts[self.instr_index].astype(np.float64) ** -settings.balance
+        weights *= np.where(unmet_intent(data, rows, instr), settings.unmet_weight, 1.0)
+        if not weights.sum() > 0:
+            raise DatasetError(
+                "every training grasp misses its intent and --unmet-weight is 0: raise it"
+            )
         self.row_weights = weights / weights.sum()
         # paraphrases per instruction: index 0 is the canonical text
         self.texts: list[list[str]] = []
@@ -590,6 +614,8 @@ def train(
     target += " --relabel" if settings.relabel else ""
     if settings.anchors_on_part != TrainSettings.anchors_on_part:
         target += f" --anchors-on-part {settings.anchors_on_part}"
+    if settings.unmet_weight != TrainSettings.unmet_weight:
+        target += f" --unmet-weight {settings.unmet_weight:g}"
     name = config.name
     steps = "" if settings.max_steps is None else f" --steps {settings.max_steps}"
     final.net.load_state_dict(ema)

@@ -361,6 +361,18 @@ def test_relabel_learns_each_grasp_under_every_intent_it_meets() -> None:
     unchecked = GraspArrays("train", arrays | {"intents_met": np.full((5, 4), -1)}, meta)
     with pytest.raises(DatasetError, match="check-intents"):
         training_pairs(unchecked, relabel=True)
+    # --unmet-weight applies to the pairs that teach a grasp under an intent it misses: row 1
+    # (a Hold grasp missing Hold) only under its own instruction, row 2 (meeting none)
+    from learned.train_interaction import unmet_intent
+
+    rows, texts = training_pairs(data, all_rows=True)
+    assert unmet_intent(data, rows, texts).tolist() == [False, True, True, False, False]
+    rows, texts = training_pairs(data, all_rows=True, relabel=True)
+    pairs = list(zip(rows.tolist(), texts, strict=True))
+    unmet = unmet_intent(data, rows, texts)
+    assert {p for p, u in zip(pairs, unmet, strict=True) if u} == {(2, "Liftup a mug by body")}
+    no_column = GraspArrays("train", {k: v for k, v in arrays.items() if k != "intent_ok"}, meta)
+    assert not unmet_intent(no_column, rows, texts).any()
 
 
 def test_rows_are_counted_by_their_anchors_on_the_instructed_part(tmp_path: Path) -> None:

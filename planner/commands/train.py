@@ -86,6 +86,14 @@ def register(sub: argparse._SubParsersAction) -> None:
         "(default 3; 0 keeps every grasp)",
     )
     i.add_argument(
+        "--unmet-weight",
+        type=share,
+        default=1.0,
+        metavar="W",
+        help="with --all-rows: how often, relative to the others, the grasps that miss their "
+        "own intent are drawn (0 to 1, default 1)",
+    )
+    i.add_argument(
         "--install",
         action="store_true",
         help="copy the final weights to learned/weights/ (the shipped model)",
@@ -168,6 +176,7 @@ def interaction_setup(args: argparse.Namespace):
         all_rows=args.all_rows,
         relabel=args.relabel,
         anchors_on_part=args.anchors_on_part,
+        unmet_weight=args.unmet_weight,
     )
     return config, settings
 
