@@ -91,6 +91,13 @@ class TrainSettings:
     augment: bool = True
     progress: bool = True
 
+    def __post_init__(self) -> None:
+        if self.unmet_weight != 1.0 and not self.all_rows:
+            raise DatasetError(
+                "--unmet-weight weighs the grasps that miss their intent, which only --all-rows "
+                "keeps: add --all-rows or drop --unmet-weight"
+            )
+
 
 @dataclass
 class TrainResult:

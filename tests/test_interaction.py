@@ -373,6 +373,10 @@ def test_relabel_learns_each_grasp_under_every_intent_it_meets() -> None:
     assert {p for p, u in zip(pairs, unmet, strict=True) if u} == {(2, "Liftup a mug by body")}
     no_column = GraspArrays("train", {k: v for k, v in arrays.items() if k != "intent_ok"}, meta)
     assert not unmet_intent(no_column, rows, texts).any()
+    from learned.train_interaction import TrainSettings
+
+    with pytest.raises(DatasetError, match="--all-rows"):
+        TrainSettings(unmet_weight=0.3)  # without --all-rows there is nothing to weigh
 
 
 def test_rows_are_counted_by_their_anchors_on_the_instructed_part(tmp_path: Path) -> None:
