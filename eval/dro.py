@@ -5,16 +5,18 @@
 Per hand, on rows of the split (a fixed random sample per hand):
 - D error: mean |D_hat - D| (mm) over the pairs with D < 5 cm, D the distances from the hand's
   surface points at the dataset grasp to the object input points;
-- hand point error after multilateration + per-body Kabsch (median mm), over the hand points
-  within 5 cm of the object at the dataset grasp (`near`) and over all 512;
+- hand point error of the targets (median mm; `--placement`: "multilateration" + per-body
+  Kabsch, the planner's, or "surface", learned.dro.surface_targets), over the hand points within 5 cm of the
+  object at the dataset grasp (`near`) and over all 512, and the error the grasp program
+  sees: the closeness-weighted mean over the points it gets (closeness > 0.05);
 - for the first `--validate` rows: the Drake grasp program with the dataset anchors (and the
-  object's normals there), the dataset wrist as its prior and the multilaterated targets
-  weighted by predicted closeness (GraspTargets.point_weights), started from the open pose;
+  object's normals there), the dataset wrist as its prior and the targets weighted by
+  predicted closeness (GraspTargets.point_weights), started from the open pose;
   joint error vs the dataset grasp (mean |q - q_grasp| in degrees over the hand's joints) and
   first-try validated success (the first solve, pregrasp, squeeze and MuJoCo validation as
   the planner runs them, `--protocol`, default paper);
 - the network's own guess of where each hand point goes (input + learned offset, the kernel's
-  distance feature), median error over the `near` points, beside multilateration's;
+  distance feature), median error over the `near` points, beside the targets';
 - timings: network forward (one thread), the whole prediction, the solve.
 
 Leave-one-hand-out: train with `--hands` on two hands (learned.train_dro) and evaluate its
@@ -34,14 +36,16 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from learned.dro import load_weights, predict
+from learned.dro import PLACEMENTS, load_weights, predict
 from learned.train_dro import prepare
 from models.hands import load_hand
 from models.objects import make_object
 from planner.functional import finish_grasp
 from planner.grasp_program import GraspTargets, grasp_program
+from planner.learned_proposer import MIN_CLOSENESS
 
 NEAR = 0.05  # m
+KEPT = MIN_CLOSENESS  # the points whose targets the grasp program gets
 
 
 @dataclass
@@ -51,6 +55,8 @@ class HandRecord:
     d_error_mm: list[float] = field(default_factory=list)  # per row
     point_error_near_mm: list[float] = field(default_factory=list)  # per point, pooled
     point_error_all_mm: list[float] = field(default_factory=list)
+    kept_error_sum: float = 0.0  # closeness x error (m) over the points the program gets
+    kept_weight_sum: float = 0.0
     headed_error_near_mm: list[float] = field(default_factory=list)
     joint_error_deg: list[float] = field(default_factory=list)
     solved_ok: list[bool] = field(default_factory=list)
@@ -72,6 +78,7 @@ class HandRecord:
             "d_error_mm": mean(self.d_error_mm),
             "point_error_near_median_mm": med(self.point_error_near_mm),
             "point_error_all_median_mm": med(self.point_error_all_mm),
+            "kept_error_mm": 1000 * self.kept_error_sum / max(self.kept_weight_sum, 1e-12),
             "headed_error_near_median_mm": med(self.headed_error_near_mm),
             "validated_rows": len(self.first_try_success),
             "joint_error_deg": mean(self.joint_error_deg),
@@ -93,6 +100,7 @@ def evaluate(
     hands: list[str] | None,
     seed: int = 0,
     anchors_only: bool = False,
+    placement: str = "multilateration",
 ) -> dict:
     torch.set_num_threads(1)
     ckpt = load_weights(weights)
@@ -111,7 +119,9 @@ def evaluate(
         for n_done, r in enumerate(tqdm(rows, desc=name, leave=False)):
             truth = torch.from_numpy(data.grasp_points[r]).double()
             obj_xyz = torch.from_numpy(data.obj[r, :, :3]).double()
-            pred = predict(net, hand, data.wrist[r], data.obj[r], data.text[r])
+            pred = predict(
+                net, hand, data.wrist[r], data.obj[r], data.text[r], data.normals[r], placement
+            )
             rec.forward_s.append(pred.forward_time)
             rec.predict_s.append(pred.total_time)
             true_d = torch.cdist(truth, obj_xyz).numpy()
@@ -120,6 +130,9 @@ def evaluate(
             err = np.linalg.norm(pred.targets - truth.numpy(), axis=1) * 1000
             rec.point_error_all_mm.extend(err.tolist())
             rec.point_error_near_mm.extend(err[close.any(axis=1)].tolist())
+            kept = pred.closeness > KEPT
+            rec.kept_error_sum += float((err[kept] / 1000 * pred.closeness[kept]).sum())
+            rec.kept_weight_sum += float(pred.closeness[kept].sum())
             headed = np.linalg.norm(pred.headed - truth.numpy(), axis=1) * 1000
             rec.headed_error_near_mm.extend(headed[close.any(axis=1)].tolist())
             if n_done < validate:
@@ -131,6 +144,7 @@ def evaluate(
         "trained_on": meta.get("hands"),
         "weights_meta": meta,
         "anchors_only": anchors_only,
+        "placement": placement,
         "hands": [records[h].summary() for h in sorted(records)],
         "config": asdict(net.cfg),
     }
@@ -146,7 +160,7 @@ def _solve_and_validate(
     program = grasp_program(hand, obj.collision_pieces())
     anchors = data.anchors[r]
     nearest = np.argmin(np.linalg.norm(obj.points[None] - anchors[:, None], axis=2), axis=1)
-    keep = np.flatnonzero(pred.closeness > 0.05)  # the points D(R,O) says are near contact
+    keep = np.flatnonzero(pred.closeness > KEPT)  # the points D(R,O) says are near contact
     if anchors_only:
         keep = keep[:0]
     solved = program.solve(
@@ -178,6 +192,7 @@ def _table(result: dict) -> str:
         ("D err mm", "d_error_mm", "{:.1f}"),
         ("pt err near mm", "point_error_near_median_mm", "{:.1f}"),
         ("pt err all mm", "point_error_all_median_mm", "{:.1f}"),
+        ("kept err mm", "kept_error_mm", "{:.1f}"),
         ("headed err near mm", "headed_error_near_median_mm", "{:.1f}"),
         ("validated", "validated_rows", "{}"),
         ("joint err deg", "joint_error_deg", "{:.1f}"),
@@ -197,7 +212,8 @@ def _table(result: dict) -> str:
             )
         lines.append(" | ".join(cells))
     head = (
-        f"split {result['split']}, weights {result['weights']} (trained on {result['trained_on']})"
+        f"split {result['split']}, weights {result['weights']} (trained on "
+        f"{result['trained_on']}), targets by {result['placement']}"
     )
     if result["anchors_only"]:
         head += "; Drake WITHOUT the D(R,O) targets (anchors and wrist only)"
@@ -219,6 +235,12 @@ def main(argv: list[str] | None = None) -> int:
         action="store_true",
         help="solve without the D(R,O) point targets (the comparison)",
     )
+    parser.add_argument(
+        "--placement",
+        choices=PLACEMENTS,
+        default="multilateration",
+        help="how distances become targets (learned.dro.predict; default: the planner's)",
+    )
     args = parser.parse_args(argv)
     start = time.perf_counter()
     result = evaluate(
@@ -230,6 +252,7 @@ def main(argv: list[str] | None = None) -> int:
         args.protocol,
         args.hands,
         anchors_only=args.anchors_only,
+        placement=args.placement,
     )
     result["wall_s"] = round(time.perf_counter() - start, 1)
     print(_table(result))

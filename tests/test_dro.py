@@ -22,7 +22,9 @@ from learned.dro import (
     place_hand,
     predict,
     save_weights,
+    surface_targets,
 )
+from models.errors import DrograspError
 from models.hands import available_hands, load_hand
 from planner.grasp_program import GraspTargets, grasp_program
 
@@ -144,10 +146,48 @@ def test_predict_gives_a_target_for_every_hand_point(hand_name):
     net = DRONet(TINY).eval()
     rng = np.random.default_rng(0)
     obj = np.c_[rng.uniform(-0.05, 0.05, (512, 3)), rng.uniform(0, 1, 512)]
+    normals = np.tile([0.0, 0.0, 1.0], (512, 1))
     wrist = np.array([0, 0, 0.15, 1, 0, 0, 0.0])
-    pred = predict(net, hand, wrist, obj, _fake_embed(["Use a mug by handle"])[0])
+    pred = predict(net, hand, wrist, obj, _fake_embed(["Use a mug by handle"])[0], normals)
     assert pred.distances.shape == (512, 512) and pred.targets.shape == (512, 3)
     assert np.isfinite(pred.targets).all() and ((pred.closeness > 0) & (pred.closeness <= 1)).all()
+
+
+@pytest.mark.parametrize("hand_name", available_hands())
+def test_predict_places_by_surface_or_multilateration(hand_name):
+    """Both placements give finite targets; the surface one needs the object's normals."""
+    hand = load_hand(hand_name)
+    torch.manual_seed(0)
+    net = DRONet(TINY).eval()
+    rng = np.random.default_rng(0)
+    obj = np.c_[rng.uniform(-0.05, 0.05, (512, 3)), rng.uniform(0, 1, 512)]
+    normals = rng.normal(size=(512, 3))
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    wrist = np.array([0, 0, 0.15, 1, 0, 0, 0.0])
+    text = _fake_embed(["Use a mug by handle"])[0]
+    surface = predict(net, hand, wrist, obj, text, normals, "surface")
+    multi = predict(net, hand, wrist, obj, text, placement="multilateration")
+    assert np.isfinite(surface.targets).all() and np.isfinite(multi.targets).all()
+    assert not np.allclose(surface.targets, multi.targets)
+    with pytest.raises(DrograspError, match="normals"):
+        predict(net, hand, wrist, obj, text, placement="surface")
+    with pytest.raises(DrograspError, match="placement"):
+        predict(net, hand, wrist, obj, text, normals, "nearest")
+
+
+def test_surface_targets_put_points_back_above_a_plane():
+    """Exact distances to a dense patch of a plane (normals up): each point comes back within
+    the grid spacing, whatever its height above the plane."""
+    g = np.linspace(-0.05, 0.05, 41)  # 2.5 mm grid
+    plane = torch.tensor([[x, y, 0.0] for x in g for y in g], dtype=torch.float64)[None]
+    up = torch.zeros_like(plane)
+    up[..., 2] = 1.0
+    rng = np.random.default_rng(1)
+    points = torch.tensor(
+        np.c_[rng.uniform(-0.03, 0.03, (50, 2)), rng.uniform(0.0, 0.03, 50)], dtype=torch.float64
+    )[None]
+    placed = surface_targets(plane, up, torch.cdist(points, plane))
+    assert float((placed - points).norm(dim=-1).max()) < 0.0025
 
 
 @pytest.mark.parametrize("hand_name", available_hands())
