@@ -29,6 +29,7 @@ from models.grasp import Grasp, from_dexgraspbench, to_dexgraspbench
 from models.hands import available_hands
 from models.hands.mjcf_frame import mjcf_root_offset
 from models.objects import make_object
+from planner.batch.executors import one_thread
 from planner.functional import FunctionalPlanner
 from planner.settings import PlannerSettings, ScheduleSettings
 from planner.validation import validate
@@ -194,7 +195,7 @@ def main() -> None:
         work = [j for h in args.hands for j in [j for j in work if j[0] == h][: args.limit]]
     records: list[PairVerdicts] = []
     out = args.out.open("w") if args.out else None
-    with ProcessPoolExecutor(args.workers) as pool:
+    with ProcessPoolExecutor(args.workers, initializer=one_thread) as pool:
         for rec in tqdm(pool.map(judge_pair, work, chunksize=1), total=len(work), unit="pair"):
             records.append(rec)
             if out:

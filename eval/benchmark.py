@@ -55,6 +55,7 @@ from models.errors import DrograspError
 from models.hands import available_hands, load_hand
 from models.objects import ObjectModel, make_object
 from models.objects.views import random_turn, sampled_cloud_object, single_view_object, turned
+from planner.batch.executors import one_thread
 from planner.commands.validate import parse_overrides
 from planner.functional import FunctionalPlanner
 from planner.intent import check_configuration
@@ -409,7 +410,7 @@ def main(argv: list[str] | None = None) -> int:
             sink.flush()
 
         if args.workers > 1:
-            with ProcessPoolExecutor(args.workers) as pool:
+            with ProcessPoolExecutor(args.workers, initializer=one_thread) as pool:
                 for rec in tqdm(pool.map(run_task, todo), total=len(todo), desc="benchmark"):
                     keep(rec)
         else:

@@ -24,6 +24,7 @@ from tqdm import tqdm
 from models.errors import PlanningError
 from models.hands import available_hands
 from models.objects import HELDOUT, categories, instructions, make_object, seeds
+from planner.batch.executors import one_thread
 from planner.commands.validate import parse_overrides
 from planner.functional import FunctionalPlanner
 from planner.settings import PlannerSettings, ScheduleSettings, with_overrides
@@ -273,7 +274,7 @@ def main() -> None:
         for p in pairs(args.split, args.objects_per_category, args.hands)
     ][: args.limit]
     records: list[PairRecord] = []
-    with ProcessPoolExecutor(args.workers) as pool:
+    with ProcessPoolExecutor(args.workers, initializer=one_thread) as pool:
         for rec in tqdm(pool.map(run_pair, jobs, chunksize=1), total=len(jobs), unit="pair"):
             records.append(rec)
     if args.out:

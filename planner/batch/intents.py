@@ -23,6 +23,7 @@ import numpy as np
 from learned.dataset import block_digest, block_path, intents_path, read_intents, read_meta
 from models.hands import HandModel, load_hand
 from models.objects import INTENTS, TABLE, ObjectModel, instruction_text, make_object
+from planner.batch.executors import one_thread
 from planner.intent import check_configuration
 
 
@@ -81,7 +82,8 @@ def check_intents(
     `progress(block, rows)` is called as each block is done."""
     root = str(root)
     todo = pending_blocks(root) if blocks is None else blocks
-    pool = ProcessPoolExecutor(workers) if workers > 1 and len(todo) > 1 else None
+    many = workers > 1 and len(todo) > 1
+    pool = ProcessPoolExecutor(workers, initializer=one_thread) if many else None
     done = []
     try:
         for name, rows in (pool.map if pool else map)(_write, [root] * len(todo), todo):
