@@ -34,8 +34,10 @@ def _worker_init(parent: int) -> None:
 
 def one_thread() -> None:
     """One torch/OpenMP thread in this process: a pool worker on a machine whose cores the
-    workers share. With torch's default (a thread per core) two workers on two cores ran the
-    networks 2.5 times slower (D(R,O) 0.25 against 0.10 s a sample in eval.benchmark)."""
+    workers share. With torch's default (a thread per core), two workers on this 2-core
+    machine each ran a D(R,O) forward in 0.195 s against 0.083 s with one thread each
+    (median of 30, both workers at once); eval.benchmark's runs without this pin recorded
+    D(R,O) at 0.23-0.27 s a sample against 0.10 s with it."""
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     import torch
 
