@@ -34,6 +34,7 @@ from pydrake.systems.framework import DiagramBuilder
 from models.errors import PlanningError
 from models.hands import HandModel
 from models.reproducible import rounded, rounded_within
+from planner.point_costs import pooled
 from planner.squeeze import balanced_forces
 from planner.validation.objects import CollisionObject, as_collision_object
 
@@ -213,6 +214,7 @@ class GraspProgram:
             for i in link_idx
         ]
         self.point_local = local
+        self.point_link = np.asarray(link_idx)
         inspector = scene_graph.model_inspector()
         root_body = plant.GetBodyByName(self.hand.root_link, self.handle.instance)
         self._palm_geoms = set(plant.GetCollisionGeometriesForBody(root_body))
@@ -393,17 +395,19 @@ class GraspProgram:
                         f"point_weights of shape {weights.shape} (or negative): expected "
                         f"{len(targets.point_index)} weights >= 0, one per point target"
                     )
-            for i, target, w in zip(
-                targets.point_index, rounded(targets.point_targets), weights, strict=True
+            costs = pooled(
+                self.point_link,
+                self.point_local,
+                targets.point_index,
+                rounded(targets.point_targets),
+                weights,
+            )
+            for i, local, target, w in zip(
+                costs.point, costs.local, costs.targets, costs.weights, strict=True
             ):
-                if w > 0:
-                    ik.AddPositionCost(
-                        world,
-                        target,
-                        self.point_frames[i],
-                        self.point_local[i],
-                        s.point_weight * w * np.eye(3),
-                    )
+                ik.AddPositionCost(
+                    world, target, self.point_frames[i], local, s.point_weight * w * np.eye(3)
+                )
         start_wrist = self.handle.root_body.floating_positions_start()
         wrist_vars = qvar[start_wrist : start_wrist + 7]
         if targets.fix_wrist:
