@@ -20,11 +20,41 @@ def test_unlabelled_copy_keeps_the_geometry_and_hides_the_parts():
 
 def test_every_method_gets_the_same_pairs_and_paraphrases_go_to_learned_ones_only():
     tasks = benchmark.tasks("test", 1, ["allegro"], ["learned", "model"], True, 8, 8, ["mug"])
-    learned = [t for t in tasks if t[0] == "learned"]
-    model = [t for t in tasks if t[0] == "model"]
-    assert [t[1:5] for t in learned] == [t[1:5] for t in model] and len(learned) == 5
-    assert all(t[5] == t[4] for t in model)  # the model-based planner needs the canonical text
-    assert all(t[5] != t[4] for t in learned)
+    learned = [t for t in tasks if t.method == "learned"]
+    model = [t for t in tasks if t.method == "model"]
+    pair = [(t.hand, t.category, t.seed, t.instruction) for t in learned]
+    assert pair == [(t.hand, t.category, t.seed, t.instruction) for t in model]
+    assert len(learned) == 5
+    assert all(t.text == t.instruction for t in model)  # the model-based planner needs it
+    assert all(t.text != t.instruction for t in learned)
+
+
+def test_sample_seeds_repeat_the_learned_methods_only_and_are_told_apart():
+    tasks = benchmark.tasks(
+        "test", 1, ["allegro"], ["learned", "model"], False, 8, 8, ["mug"], seeds=(0, 1, 2)
+    )
+    learned = [t for t in tasks if t.method == "learned"]
+    assert len(learned) == 15 and {t.sample_seed for t in learned} == {0, 1, 2}
+    assert len([t for t in tasks if t.method == "model"]) == 5  # it draws nothing
+    assert len({t.key for t in tasks}) == len(tasks)  # resumable: every task its own record
+
+
+def test_the_table_gives_first_and_within_per_seed():
+    def rec(seed, first, within):
+        r = benchmark.Record("learned", "allegro", "mug", 0, "Use a mug by handle", "t", "handle")
+        r.sample_seed, r.first_ok, r.returned_ok = seed, first, within
+        return r
+
+    rows = benchmark.summarise(
+        [rec(0, True, True), rec(0, False, True), rec(1, False, False), rec(1, False, True)]
+    )
+    assert rows[0]["first_by_seed"] == {0: 50.0, 1: 0.0} and rows[0]["first"] == 25.0
+    assert "| 50, 0 / 100, 50% |" in benchmark.table(rows, 8)
+
+
+def test_the_sample_seed_is_set_by_seeds_not_by_set(tmp_path):
+    with pytest.raises(SystemExit, match="--seeds"):
+        benchmark.main(["--set", "learned.seed=3", "--out", str(tmp_path)])
 
 
 @pytest.mark.slow
@@ -86,7 +116,7 @@ def test_each_view_gives_the_planner_its_input_and_judges_on_the_object(view, mo
     monkeypatch.setattr(benchmark.FunctionalPlanner, "plan", plan)
     monkeypatch.setattr(benchmark, "_PLANNERS", {})
     task = ("learned", "allegro", "mug", 3, "Use a mug by handle", "Use a mug by handle")
-    rec = benchmark.run_task((*task, 8, 4, view, False, ()))
+    rec = benchmark.run_task(benchmark.Task(*task, 8, 4, view, False, ()))
     assert rec.error.startswith("Stop") and rec.view == view
     (obj,) = given
     assert not obj.labelled
