@@ -127,16 +127,12 @@ class Record:
 
     @property
     def key(self) -> tuple:
-        return (
-            self.method,
-            self.hand,
-            self.category,
-            self.seed,
-            self.instruction,
-            self.view,
-            self.turn,
-            self.sample_seed,
-        )
+        """What tells one record from another: a resumed run skips the tasks with its key."""
+        return tuple(getattr(self, name) for name in KEY_FIELDS)
+
+
+# the fields of a Record's (and its Task's) key
+KEY_FIELDS = ("method", "hand", "category", "seed", "instruction", "view", "turn", "sample_seed")
 
 
 @dataclass(frozen=True)
@@ -159,16 +155,7 @@ class Task:
     @property
     def key(self) -> tuple:
         """Its Record.key."""
-        return (
-            self.method,
-            self.hand,
-            self.category,
-            self.seed,
-            self.instruction,
-            self.view,
-            self.turn,
-            self.sample_seed,
-        )
+        return tuple(getattr(self, name) for name in KEY_FIELDS)
 
 
 def unlabelled(obj: ObjectModel) -> ObjectModel:

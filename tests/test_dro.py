@@ -139,23 +139,9 @@ def test_training_writes_and_resumes(tmp_path, monkeypatch):
         train_dro.train(replace(cfg, lr=0.5), progress=False)
 
 
-@pytest.mark.parametrize("hand_name", available_hands())
-def test_predict_gives_a_target_for_every_hand_point(hand_name):
-    hand = load_hand(hand_name)
-    torch.manual_seed(0)
-    net = DRONet(TINY).eval()
-    rng = np.random.default_rng(0)
-    obj = np.c_[rng.uniform(-0.05, 0.05, (512, 3)), rng.uniform(0, 1, 512)]
-    normals = np.tile([0.0, 0.0, 1.0], (512, 1))
-    wrist = np.array([0, 0, 0.15, 1, 0, 0, 0.0])
-    pred = predict(net, hand, wrist, obj, _fake_embed(["Use a mug by handle"])[0], normals)
-    assert pred.distances.shape == (512, 512) and pred.targets.shape == (512, 3)
-    assert np.isfinite(pred.targets).all() and ((pred.closeness > 0) & (pred.closeness <= 1)).all()
-
-
-@pytest.mark.parametrize("hand_name", available_hands())
-def test_predict_places_by_surface_or_multilateration(hand_name):
-    """Both placements give finite targets; the surface one needs the object's normals."""
+def _tiny_prediction_inputs(hand_name: str) -> tuple:
+    """A tiny untrained network, a hand, a wrist above a random object input (512, 4) with
+    unit normals, and a sentence embedding."""
     hand = load_hand(hand_name)
     torch.manual_seed(0)
     net = DRONet(TINY).eval()
@@ -164,7 +150,21 @@ def test_predict_places_by_surface_or_multilateration(hand_name):
     normals = rng.normal(size=(512, 3))
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)
     wrist = np.array([0, 0, 0.15, 1, 0, 0, 0.0])
-    text = _fake_embed(["Use a mug by handle"])[0]
+    return net, hand, wrist, obj, normals, _fake_embed(["Use a mug by handle"])[0]
+
+
+@pytest.mark.parametrize("hand_name", available_hands())
+def test_predict_gives_a_target_for_every_hand_point(hand_name):
+    net, hand, wrist, obj, _, text = _tiny_prediction_inputs(hand_name)
+    pred = predict(net, hand, wrist, obj, text)
+    assert pred.distances.shape == (512, 512) and pred.targets.shape == (512, 3)
+    assert np.isfinite(pred.targets).all() and ((pred.closeness > 0) & (pred.closeness <= 1)).all()
+
+
+@pytest.mark.parametrize("hand_name", available_hands())
+def test_predict_places_by_surface_or_multilateration(hand_name):
+    """Both placements give finite targets; the surface one needs the object's normals."""
+    net, hand, wrist, obj, normals, text = _tiny_prediction_inputs(hand_name)
     surface = predict(net, hand, wrist, obj, text, normals, "surface")
     multi = predict(net, hand, wrist, obj, text, placement="multilateration")
     assert np.isfinite(surface.targets).all() and np.isfinite(multi.targets).all()
