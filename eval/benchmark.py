@@ -276,12 +276,12 @@ def tasks(
     chosen = pairs(split, per_category, hands)
     if category_names:
         chosen = [c for c in chosen if c[1] in category_names]
+    over = tuple((overrides or {}).items())
     for i, (hand, cat, seed, instruction) in enumerate(chosen):
         reworded = eval_paraphrases(request_of(instruction))
         for method in methods:
             learned = METHODS[method]["proposer"] != "model"
             text = reworded[i % len(reworded)] if paraphrase and learned else instruction
-            over = tuple((overrides or {}).items())
             for sample_seed in seeds if learned else seeds[:1]:
                 task = (method, hand, cat, seed, instruction, text, max_candidates, samples)
                 out.append(Task(*task, view, turn, over, sample_seed))

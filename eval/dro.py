@@ -6,9 +6,10 @@ Per hand, on rows of the split (a fixed random sample per hand):
 - D error: mean |D_hat - D| (mm) over the pairs with D < 5 cm, D the distances from the hand's
   surface points at the dataset grasp to the object input points;
 - hand point error of the targets (median mm; `--placement`: "multilateration" + per-body
-  Kabsch, the planner's, or "surface", learned.dro.surface_targets), over the hand points within 5 cm of the
-  object at the dataset grasp (`near`) and over all 512, and the error the grasp program
-  sees: the closeness-weighted mean over the points it gets (closeness > 0.05);
+  Kabsch, the planner's, or "surface", learned.dro.surface_targets), over the hand points
+  within 5 cm of the object at the dataset grasp (`near`) and over all 512, and the error the
+  grasp program sees: the closeness-weighted mean over the points it gets (closeness above
+  planner.learned_proposer.MIN_CLOSENESS);
 - for the first `--validate` rows: the Drake grasp program with the dataset anchors (and the
   object's normals there), the dataset wrist as its prior and the targets weighted by
   predicted closeness (GraspTargets.point_weights), started from the open pose;
@@ -45,7 +46,6 @@ from planner.grasp_program import GraspTargets, grasp_program
 from planner.learned_proposer import MIN_CLOSENESS
 
 NEAR = 0.05  # m
-KEPT = MIN_CLOSENESS  # the points whose targets the grasp program gets
 
 
 @dataclass
@@ -55,7 +55,7 @@ class HandRecord:
     d_error_mm: list[float] = field(default_factory=list)  # per row
     point_error_near_mm: list[float] = field(default_factory=list)  # per point, pooled
     point_error_all_mm: list[float] = field(default_factory=list)
-    kept_error_sum: float = 0.0  # closeness x error (m) over the points the program gets
+    kept_error_sum: float = 0.0  # closeness x error (mm) over the points the program gets
     kept_weight_sum: float = 0.0
     headed_error_near_mm: list[float] = field(default_factory=list)
     joint_error_deg: list[float] = field(default_factory=list)
@@ -78,7 +78,7 @@ class HandRecord:
             "d_error_mm": mean(self.d_error_mm),
             "point_error_near_median_mm": med(self.point_error_near_mm),
             "point_error_all_median_mm": med(self.point_error_all_mm),
-            "kept_error_mm": 1000 * self.kept_error_sum / max(self.kept_weight_sum, 1e-12),
+            "kept_error_mm": self.kept_error_sum / max(self.kept_weight_sum, 1e-12),
             "headed_error_near_median_mm": med(self.headed_error_near_mm),
             "validated_rows": len(self.first_try_success),
             "joint_error_deg": mean(self.joint_error_deg),
@@ -130,8 +130,8 @@ def evaluate(
             err = np.linalg.norm(pred.targets - truth.numpy(), axis=1) * 1000
             rec.point_error_all_mm.extend(err.tolist())
             rec.point_error_near_mm.extend(err[close.any(axis=1)].tolist())
-            kept = pred.closeness > KEPT
-            rec.kept_error_sum += float((err[kept] / 1000 * pred.closeness[kept]).sum())
+            kept = pred.closeness > MIN_CLOSENESS  # the points the grasp program gets
+            rec.kept_error_sum += float((err[kept] * pred.closeness[kept]).sum())
             rec.kept_weight_sum += float(pred.closeness[kept].sum())
             headed = np.linalg.norm(pred.headed - truth.numpy(), axis=1) * 1000
             rec.headed_error_near_mm.extend(headed[close.any(axis=1)].tolist())
@@ -160,7 +160,7 @@ def _solve_and_validate(
     program = grasp_program(hand, obj.collision_pieces())
     anchors = data.anchors[r]
     nearest = np.argmin(np.linalg.norm(obj.points[None] - anchors[:, None], axis=2), axis=1)
-    keep = np.flatnonzero(pred.closeness > KEPT)  # the points D(R,O) says are near contact
+    keep = np.flatnonzero(pred.closeness > MIN_CLOSENESS)  # what D(R,O) says is near contact
     if anchors_only:
         keep = keep[:0]
     solved = program.solve(
