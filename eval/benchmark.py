@@ -169,7 +169,8 @@ def touched_part(grasp, obj: ObjectModel, hand) -> str:
     return grasp_part(hand, wrist, np.asarray(grasp.grasp), obj)
 
 
-_PLANNERS: dict[tuple[str, str, int], FunctionalPlanner] = {}
+# one planner per worker for each method, hand, sample seed and settings
+_PLANNERS: dict[tuple, FunctionalPlanner] = {}
 
 
 def full_object(cat: str, seed: int, turn: bool) -> ObjectModel:
@@ -187,7 +188,7 @@ def run_task(task: Task) -> Record:
     part = task.instruction.rsplit(" by ", 1)[1]
     rec = Record(method, task.hand, cat, seed, task.instruction, task.text, part, view, turn)
     rec.sample_seed = task.sample_seed
-    key = (method, task.hand, task.sample_seed)
+    key = (method, task.hand, task.sample_seed, task.max_candidates, task.samples, task.overrides)
     if key not in _PLANNERS:
         settings = PlannerSettings(
             schedule=ScheduleSettings(max_candidates=task.max_candidates),

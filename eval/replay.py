@@ -10,6 +10,14 @@ Times per grasp are the recorded stage times of the solves and validations the p
     python -m eval.replay RECORDS.jsonl [--candidates 8] \
         [--set schedule.sweep_after=null schedule.gate_solves=8]
 
+`eval.benchmark` records of one method replay the same way (`--out DIR` with `--candidates 24
+--set schedule.validate_all=true`: for the learned pipeline its 16 samples and the region
+proposals after them, in the order they were solved); they are scored as eval.benchmark scores
+them, held on the full object and on the instructed part of the labelled object, while the
+policy sees only what the method saw (a learned plan has no part labels):
+
+    python -m eval.replay runs/bl_all3/records.jsonl --method learned --set schedule.gate_solves=24
+
 `--retry DEEPER.jsonl` (records of the same pairs made with a deeper squeeze,
 `--set program.squeeze_depth=D program.retry_squeeze_depth=0`) replays a squeeze retry at that
 depth: a candidate that slips in RECORDS holds if it holds in DEEPER, as `finish_grasp` decides.
@@ -19,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import statistics
 from dataclasses import replace
 from pathlib import Path
 
@@ -55,8 +64,19 @@ REPLAYABLE = (
 )
 
 
-# recorded stage times (CandidateResult.times) that a solved / a validated candidate costs
-SOLVE_STAGES = ("build", "propose", "solve", "quality", "intent")
+# recorded stage times (CandidateResult.times) that a solved / a validated candidate costs (the
+# first candidate carries the plan's own: building, proposing, drawing the samples)
+SOLVE_STAGES = (
+    "build",
+    "propose",
+    "solve",
+    "quality",
+    "intent",
+    "dro",
+    "interaction",
+    "region",
+    "direct",
+)
 VALIDATE_STAGES = ("pregrasp", "validate", "retry")
 
 
@@ -70,6 +90,56 @@ def load_records(path: Path) -> list[PairRecord]:
         return read_records(path)
     except (OSError, json.JSONDecodeError, TypeError) as err:
         raise RecordsError(f"cannot read benchmark records from {path}: {err}") from err
+
+
+def is_benchmark_file(path: Path) -> bool:
+    """True for `eval.benchmark` records (their rows name a method), False for
+    `eval.planner_benchmark` ones."""
+    try:
+        with path.open() as f:
+            first = next((line for line in f if line.strip()), "{}")
+        return "method" in json.loads(first)
+    except (OSError, json.JSONDecodeError) as err:
+        raise RecordsError(f"cannot read benchmark records from {path}: {err}") from err
+
+
+def load_benchmark_records(path: Path, method: str | None) -> tuple[list[PairRecord], bool]:
+    """One method's `eval.benchmark` records as PairRecords, and whether that method plans with
+    part labels (the model-based planner; the learned methods see none). Their candidate
+    summaries keep how eval.benchmark scores them: `held_full` and `touched`."""
+    from eval.benchmark import METHODS
+
+    try:
+        rows = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+    except (OSError, json.JSONDecodeError) as err:
+        raise RecordsError(f"cannot read benchmark records from {path}: {err}") from err
+    methods = sorted({r["method"] for r in rows})
+    if method is None and len(methods) == 1:
+        method = methods[0]
+    if method not in methods:
+        raise RecordsError(f"{path} holds the methods {methods}; choose one with --method")
+    records = [
+        PairRecord(
+            hand=r["hand"],
+            category=r["category"],
+            seed=r["seed"],
+            instruction=r["instruction"],
+            part=r["part"],
+            first_holds=r["first_ok"],
+            first_part_ok=r["first_ok"],
+            returned_holds=r["held"],
+            part_ok=r["returned_ok"],
+            candidates=r["candidates"],
+            solve_times=[c["times"].get("solve", 0.0) for c in r["candidate_summaries"]],
+            plan_time=r["plan_time"],
+            error=r["error"],
+            candidate_summaries=r["candidate_summaries"],
+            intent_ok=r["intent_ok"],
+        )
+        for r in rows
+        if r["method"] == method and not r["error"]
+    ]
+    return records, METHODS[method]["proposer"] == "model"
 
 
 def with_retry(records: list[PairRecord], deeper: list[PairRecord]) -> list[PairRecord]:
@@ -160,9 +230,18 @@ def proposals_used(record: PairRecord, settings: PlannerSettings) -> list[dict]:
     return [c | {"rank": i} for i, c in enumerate(kept)]
 
 
-def replay_pair(record: PairRecord, settings: PlannerSettings) -> PairRecord:
-    """The record as the planner with `settings` would have produced it."""
-    recorded = proposals_used(record, settings)
+def replay_pair(
+    record: PairRecord, settings: PlannerSettings, labelled: bool = True, ordered: bool = False
+) -> PairRecord:
+    """The record as the planner with `settings` would have produced it. `labelled`: the
+    planner knew the part labels (else any held grasp ends the search, as for an unlabelled
+    object); `ordered`: the recorded candidates are the proposals in solve order (eval.benchmark
+    records) rather than proposals to choose from by `settings.proposals`."""
+    if ordered:
+        recorded = sorted(record.candidate_summaries, key=lambda c: c["rank"])
+        recorded = [c | {"rank": i} for i, c in enumerate(recorded)]
+    else:
+        recorded = proposals_used(record, settings)
     count = len(recorded)
     unvalidated = [c["rank"] for c in recorded if c["solved"] and c["validated_as"] is None]
     if unvalidated:
@@ -172,17 +251,29 @@ def replay_pair(record: PairRecord, settings: PlannerSettings) -> PairRecord:
             "as proposals)"
         )
     verdicts = {c["rank"]: (bool(c["success"]), c["part"]) for c in recorded}
+    # how a candidate is scored: as the planner saw it, or (eval.benchmark) held on the full
+    # object and the part it touches on the labelled object
+    scored = {
+        c["rank"]: (bool(c.get("held_full", c["success"])), c.get("touched", c["part"]))
+        for c in recorded
+    }
 
     def validate(cand: CandidateResult) -> None:
         cand.success, cand.part = verdicts[cand.rank]
 
     scheduled = run_schedule(
-        count, lambda i: _candidate(recorded[i]), validate, record.part, settings
+        count,
+        lambda i: _candidate(recorded[i]),
+        validate,
+        record.part if labelled else None,
+        settings,
     )
     # what planning returns: a grasp held on the part (meeting the intent if one does), else
     # one held elsewhere
     returned = scheduled.on_part or scheduled.fallback
     first = next((c for c in scheduled.candidates if c.order == 0), None)
+    first_scored = scored[first.rank] if first is not None else (False, None)
+    returned_scored = scored[returned.rank] if returned is not None else (False, None)
     used = scheduled.candidates
     plan_time = sum(
         c.times.get(stage, 0.0)
@@ -195,11 +286,12 @@ def replay_pair(record: PairRecord, settings: PlannerSettings) -> PairRecord:
         seed=record.seed,
         instruction=record.instruction,
         part=record.part,
-        first_holds=bool(first and first.success),
-        first_part_ok=bool(first and first.success and first.part == record.part),
-        returned_holds=returned is not None,
-        part_ok=scheduled.on_part is not None,
-        intent_ok=None if scheduled.on_part is None else scheduled.found is not None,
+        first_holds=first_scored[0],
+        first_part_ok=first_scored == (True, record.part),
+        returned_holds=returned_scored[0],
+        part_ok=returned_scored == (True, record.part),
+        # eval.benchmark checks the intent on the labelled object, which records do not replay
+        intent_ok=None if ordered or scheduled.on_part is None else scheduled.found is not None,
         candidates=len(used),
         solve_times=[c.solve.solve_time for c in used],
         plan_time=plan_time,
@@ -211,19 +303,51 @@ def replay_pair(record: PairRecord, settings: PlannerSettings) -> PairRecord:
     )
 
 
-def any_holds(records: list[PairRecord], settings: PlannerSettings) -> dict[str, float]:
+def any_holds(
+    records: list[PairRecord], settings: PlannerSettings, ordered: bool = False
+) -> dict[str, float]:
     """Per hand, the share of pairs where any of the proposals `settings` solves holds on the
-    part: the most any validation order can return."""
+    part: the most any validation order can return (`ordered`: as in replay_pair)."""
     out: dict[str, list[bool]] = {}
     for r in records:
-        held = any(c["success"] and c["part"] == r.part for c in proposals_used(r, settings))
+        used = r.candidate_summaries if ordered else proposals_used(r, settings)
+        held = any(
+            c.get("held_full", c["success"]) and c.get("touched", c["part"]) == r.part for c in used
+        )
         out.setdefault(r.hand, []).append(held)
     return {hand: sum(v) / len(v) for hand, v in sorted(out.items())}
 
 
+def print_benchmark_table(records: list[PairRecord], candidates: int) -> None:
+    """eval.benchmark's columns for replayed records: first validated candidate held on the
+    part, held on the part within `candidates` validations, held anywhere, part accuracy,
+    solves and time per pair."""
+    print(
+        f"{'hand':<8} {'pairs':>5} {'first':>6} {f'within {candidates}':>9} {'held':>6} "
+        f"{'part acc':>8} {'solves':>6} {'median s/pair':>13}"
+    )
+    for hand in sorted({r.hand for r in records}):
+        rs = [r for r in records if r.hand == hand]
+        held = [r for r in rs if r.returned_holds]
+        accuracy = sum(r.part_ok for r in held) / len(held) if held else float("nan")
+        print(
+            f"{hand:<8} {len(rs):>5} {np.mean([r.first_part_ok for r in rs]):>6.1%} "
+            f"{np.mean([r.part_ok for r in rs]):>9.1%} {len(held) / len(rs):>6.1%} "
+            f"{accuracy:>8.1%} {np.mean([r.candidates for r in rs]):>6.1f} "
+            f"{statistics.median(r.plan_time for r in rs):>13.2f}"
+        )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("records", type=Path, help="eval.planner_benchmark --out JSONL")
+    parser.add_argument(
+        "records",
+        type=Path,
+        help="eval.planner_benchmark --out JSONL, or eval.benchmark's OUT/records.jsonl",
+    )
+    parser.add_argument(
+        "--method", help="eval.benchmark records: the method to replay (learned, model, ...)"
+    )
     parser.add_argument("--candidates", type=int, default=8, help="validations at most")
     parser.add_argument(
         "--set",
@@ -250,11 +374,18 @@ def main() -> None:
                 f"replayable: {', '.join(REPLAYABLE)}"
             )
     settings = planner_settings(args.candidates, args.set)
+    labelled, ordered = True, False
     try:
-        records = load_records(args.records)
+        if is_benchmark_file(args.records):
+            if args.retry is not None:
+                raise RecordsError("--retry replays eval.planner_benchmark records only")
+            records, labelled = load_benchmark_records(args.records, args.method)
+            ordered = True
+        else:
+            records = load_records(args.records)
         if args.retry is not None:
             records = with_retry(records, load_records(args.retry))
-        replayed = [replay_pair(r, settings) for r in records]
+        replayed = [replay_pair(r, settings, labelled, ordered) for r in records]
     except RecordsError as err:
         raise SystemExit(f"error: {err}") from None
     print(
@@ -262,9 +393,12 @@ def main() -> None:
         + (f", settings {' '.join(args.set)}" if args.set else "")
         + (f", slips retried as in {args.retry}" if args.retry else "")
     )
-    print_table(summarize(replayed))
+    if ordered:
+        print_benchmark_table(replayed, args.candidates)
+    else:
+        print_table(summarize(replayed))
     try:
-        bound = any_holds(records, settings)
+        bound = any_holds(records, settings, ordered)
     except RecordsError as err:
         raise SystemExit(f"error: {err}") from None
     print(

@@ -136,3 +136,59 @@ def test_a_squeeze_retry_holds_where_the_deeper_squeeze_held():
         with_retry([base], [solved_otherwise])
     with pytest.raises(RecordsError, match="same pairs"):
         with_retry([base], [replace(deeper, instruction="Hold a mug by body")])
+
+
+def test_replay_of_a_learned_benchmark_record_is_the_plan(tmp_path):
+    """An eval.benchmark record of the learned pipeline with every candidate validated, replayed
+    with the plan's own settings, gives the plan eval.benchmark recorded with them: the
+    policy sees no part labels, the pair is scored on the labelled object."""
+    from eval import benchmark
+    from eval.replay import load_benchmark_records
+
+    def task(overrides: tuple, candidates: int):
+        pair = ("learned", "allegro", "mug", 3, TEXT, TEXT)
+        # no gate: with fewer proposals than gate_solves the weak ones would wait unvalidated
+        small = (
+            ("learned.region_proposals", 2),
+            ("schedule.sweep_after", 2),
+            ("schedule.min_quality", 0.0),
+        ) + overrides
+        return benchmark.run_task(benchmark.Task(*pair, candidates, 4, "full", False, small))
+
+    planned = task((), 3)
+    everything = task((("schedule.validate_all", True),), 32)
+    path = tmp_path / "records.jsonl"
+    path.write_text(json.dumps(asdict(everything)) + "\n")
+    (record,), labelled = load_benchmark_records(path, None)
+    assert not labelled
+    settings = PlannerSettings(
+        schedule=ScheduleSettings(max_candidates=3, sweep_after=2, min_quality=0.0)
+    )
+    replayed = replay_pair(record, settings, labelled, ordered=True)
+    assert replayed.candidates == planned.candidates
+    assert replayed.first_part_ok == planned.first_ok
+    assert replayed.part_ok == planned.returned_ok
+    assert replayed.returned_holds == planned.held
+    validated = sorted(
+        (c for c in planned.candidate_summaries if c["validated_as"] is not None),
+        key=lambda c: c["validated_as"],
+    )
+    again = sorted(
+        (c for c in replayed.candidate_summaries if c["validated_as"] is not None),
+        key=lambda c: c["validated_as"],
+    )
+    assert [c["rank"] for c in again] == [c["rank"] for c in validated]
+
+
+def test_an_unlabelled_plan_stops_at_the_first_grasp_that_holds_anywhere():
+    """Replaying a learned record: a grasp that holds on another part ends the search (the
+    planner saw no labels) and is scored as held off the part."""
+    record = PairRecord("leap", "mug", 3, TEXT, "handle", False, False, False, False, 3, [], 0.0)
+    record.candidate_summaries = [
+        _summary(0, True, None, task=0.9) | {"held_full": True, "touched": "body"},
+        _summary(1, True, None, task=0.5) | {"held_full": True, "touched": "handle"},
+    ]
+    settings = PlannerSettings(schedule=ScheduleSettings(max_candidates=3))
+    blind = replay_pair(record, settings, labelled=False, ordered=True)
+    assert (blind.first_holds, blind.first_part_ok, blind.part_ok) == (True, False, False)
+    assert blind.candidates == 2 and blind.intent_ok is None
