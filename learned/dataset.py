@@ -195,21 +195,24 @@ NAME_TABLES: dict[str, str] = {
 }
 
 
-def load_split(root: str | Path | Sequence[str | Path], split: str) -> GraspArrays:
-    """The arrays of one split over all blocks (an empty split has zero rows). Several dataset
-    folders (e.g. v1 and v2) read as one: their name tables are merged, so a row's hand,
-    category, instruction and part names are its own folder's."""
+def load_split(
+    root: str | Path | Sequence[str | Path], split: str, blocks: int | None = None
+) -> GraspArrays:
+    """The arrays of one split over all blocks, or over each folder's first `blocks` in block
+    order (the dataset as it stood then: what earlier weights were trained on). An empty split
+    has zero rows. Several dataset folders (e.g. v1 and v2) read as one: their name tables are
+    merged, so a row's hand, category, instruction and part names are its own folder's."""
     if not isinstance(root, str | Path):
         roots = list(root)
         if not roots:
             raise DatasetError("no dataset folder given")
-        return _merged([load_split(r, split) for r in roots])
+        return _merged([load_split(r, split, blocks) for r in roots])
     meta = read_meta(root)
     if split not in SPLIT_NAMES:
         raise DatasetError(f"unknown split {split!r}; choose one of {SPLIT_NAMES}")
     dof = padded_dof(meta)
     parts = []
-    for name in meta["blocks"]:
+    for name in list(meta["blocks"])[:blocks]:
         block = _read_block(root, name, dof)
         keep = block["split"] == SPLIT_NAMES.index(split)
         parts.append({k: v[keep] for k, v in block.items()})

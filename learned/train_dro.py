@@ -79,6 +79,9 @@ class TrainConfig:
     dense_points: int = 4096
     hands: tuple[str, ...] | None = None  # train on these hands' rows only (leave-one-out)
     max_rows: int | None = None  # the first rows of each split only (quick runs, tests)
+    # the first blocks of each dataset folder only: the dataset as an earlier run saw it (the
+    # shipped network was trained on the first 17 of data/grasps_v2)
+    blocks: int | None = None
     val_rows: int = 128
     checkpoint_every: int = 200
     seed: int = 0
@@ -155,13 +158,14 @@ def prepare(
     progress: bool = True,
     max_rows: int | None = None,
     use_anchors: bool = True,
+    blocks: int | None = None,
 ) -> Prepared:
     """The split's rows as arrays (optionally only some hands'), cached in `cache` (an .npz)
     keyed by the dataset's meta.json and the options; `use_anchors` False: object inputs without
     the anchors' contact map (DROConfig.anchors)."""
     from models.hands import load_hand
 
-    data = load_split(root, split)
+    data = load_split(root, split, blocks)
     a, meta = data.arrays, data.meta
     keep = np.ones(len(data), dtype=bool)
     if hands is not None:
@@ -385,7 +389,7 @@ def train(cfg: TrainConfig, progress: bool = True) -> Path:
     out.mkdir(parents=True, exist_ok=True)
     hands = tuple(cfg.hands) if cfg.hands else None
     args = (hands, cfg.dense_points)
-    more = {"max_rows": cfg.max_rows, "use_anchors": cfg.net.anchors}
+    more = {"max_rows": cfg.max_rows, "use_anchors": cfg.net.anchors, "blocks": cfg.blocks}
     data = prepare(cfg.data, "train", *args, out / "cache_train.npz", progress, **more)
     val = prepare(cfg.data, "val", *args, out / "cache_val.npz", progress, **more)
     val_rows = np.random.default_rng(cfg.seed).permutation(len(val))[: cfg.val_rows]
@@ -476,6 +480,7 @@ def train(cfg: TrainConfig, progress: bool = True) -> Path:
             "train_rows": len(data),
             "hands": sorted(set(data.hands)),
             "data": cfg.data if isinstance(cfg.data, str) else " ".join(map(str, cfg.data)),
+            "blocks": cfg.blocks,
             "val_d_error_m": history[-1]["val_d_error"],
             "train_seconds": round(elapsed, 1),
             "seed": cfg.seed,
@@ -497,6 +502,7 @@ OPTIONS = (
     "threads",
     "checkpoint_every",
     "max_rows",
+    "blocks",
 )
 
 

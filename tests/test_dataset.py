@@ -190,10 +190,18 @@ def test_blocks_grow_a_dataset_like_one_compaction(tmp_path):
     whole = compact(dirs, tmp_path / "whole")
     assert info["splits"] == whole["splits"] and info["hands"] == whole["hands"]
     assert info["generator"] == whole["generator"]
+    counts = []  # rows of the first block, of both blocks
     for split in ("train", "val", "test", "heldout"):
         a, b = load_split(grown, split), load_split(tmp_path / "whole", split)
         assert a.names("instructions") == b.names("instructions")
         np.testing.assert_array_equal(a.arrays["q_grasp"], b.arrays["q_grasp"])
+        # the dataset as it stood after its first block: that block's rows, first in the whole
+        earlier = load_split(grown, split, blocks=1)
+        np.testing.assert_array_equal(
+            earlier.arrays["q_grasp"], a.arrays["q_grasp"][: len(earlier.arrays["q_grasp"])]
+        )
+        counts.append((len(earlier.arrays["q_grasp"]), len(a.arrays["q_grasp"])))
+    assert 0 < sum(c[0] for c in counts) < sum(c[1] for c in counts)
     with pytest.raises(DatasetError, match="already holds block seeds-2"):
         add_block(grown, "seeds-2", [dirs[1]], settings=settings, seeds=(2, 4))
     with pytest.raises(DatasetError, match="other settings .differing: variants"):

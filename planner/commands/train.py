@@ -144,6 +144,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=None,
         help="only the first rows of each split (quick runs)",
     )
+    d.add_argument(
+        "--blocks",
+        type=positive_int,
+        default=None,
+        help="only the first N blocks of each dataset folder (the shipped network: 17)",
+    )
     d.add_argument("--hands", nargs="+", default=None, help="train on these hands' rows only")
     d.add_argument(
         "--no-anchors",
