@@ -36,7 +36,11 @@ TEXT_DIM = 384  # learned.text.EMBED_DIM; fixed here so the network imports no t
 WEIGHTS = Path(__file__).parent / "weights" / "dro.safetensors"
 # the ablation without anchors (DROConfig.anchors False), for eval.benchmark's no_anchors
 NO_ANCHOR_WEIGHTS = WEIGHTS.with_name("dro_no_anchors.safetensors")
-RETRAIN = "drograsp train dro --data data/grasps_v2 --out runs/dro --install"
+# the shipped weights: the first 17 blocks of data/grasps_v2 (its rows then), 3831 steps
+RETRAIN = (
+    "drograsp train dro --data data/grasps_v2 --blocks 17 --out runs/dro --epochs 8 "
+    "--steps 3831 --install"
+)
 
 
 class DROWeightsError(DrograspError, RuntimeError):

@@ -43,7 +43,8 @@ RETRAIN = "drograsp train interaction --data data/grasps_v2 --out runs/interacti
 # text and data, but the model draws [wrist, joints] and no solver follows
 DIRECT_NAME = "direct"
 DIRECT_RETRAIN = (
-    "drograsp train interaction --target joints --data data/grasps_v2 --out runs/direct --install"
+    "drograsp train interaction --target joints --data data/grasps_v2 --blocks 17 --out "
+    "runs/direct --steps 7065 --minutes 120 --install"
 )
 TARGETS = ("anchors", "joints")
 

@@ -86,6 +86,9 @@ class TrainSettings:
     # what the intent asks
     unmet_weight: float = 1.0
     samples_per_object: int = 4  # cached 2048-point samples per object
+    # the first blocks of each dataset folder only: the dataset as an earlier run saw it (the
+    # shipped direct-diffusion weights were trained on the first 17 of data/grasps_v2)
+    blocks: int | None = None
     checkpoint_minutes: float = 3.0
     threads: int = 1
     augment: bool = True
@@ -510,7 +513,7 @@ def train(
     torch.set_num_threads(settings.threads)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    train_data = load_split(data, "train")
+    train_data = load_split(data, "train", settings.blocks)
     rows, texts = training_pairs(train_data, settings.all_rows, settings.relabel)
     if len(rows) == 0:
         raise DatasetError(f"{data}: the train split has no usable rows")
@@ -623,6 +626,8 @@ def train(
         target += f" --anchors-on-part {settings.anchors_on_part}"
     if settings.unmet_weight != TrainSettings.unmet_weight:
         target += f" --unmet-weight {settings.unmet_weight:g}"
+    if settings.blocks is not None:
+        target += f" --blocks {settings.blocks}"
     name = config.name
     steps = "" if settings.max_steps is None else f" --steps {settings.max_steps}"
     final.net.load_state_dict(ema)
@@ -658,7 +663,7 @@ def train(
 
 def _val_batch(data, cache, config, settings) -> Batcher | None:
     try:
-        val = load_split(data, "val")
+        val = load_split(data, "val", settings.blocks)
     except DatasetError:
         return None
     rows = usable_rows(val)

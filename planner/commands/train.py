@@ -37,6 +37,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="wall-clock budget of the whole run, resumed parts included (default 15)",
     )
     i.add_argument("--steps", type=positive_int, default=None, help="stop after this many steps")
+    i.add_argument(
+        "--blocks",
+        type=positive_int,
+        default=None,
+        help="only the first N blocks of each dataset folder (the shipped direct weights: 17)",
+    )
     i.add_argument("--seed", type=non_negative_int, default=0)
     i.add_argument("--batch", type=positive_int, default=32, help="grasps per step (default 32)")
     i.add_argument("--threads", type=positive_int, default=1, help="torch threads (default 1)")
@@ -183,6 +189,7 @@ def interaction_setup(args: argparse.Namespace):
         relabel=args.relabel,
         anchors_on_part=args.anchors_on_part,
         unmet_weight=args.unmet_weight,
+        blocks=args.blocks,
     )
     return config, settings
 
