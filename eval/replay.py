@@ -118,28 +118,32 @@ def load_benchmark_records(path: Path, method: str | None) -> tuple[list[PairRec
         method = methods[0]
     if method not in methods:
         raise RecordsError(f"{path} holds the methods {methods}; choose one with --method")
-    records = [
-        PairRecord(
-            hand=r["hand"],
-            category=r["category"],
-            seed=r["seed"],
-            instruction=r["instruction"],
-            part=r["part"],
-            first_holds=r["first_ok"],
-            first_part_ok=r["first_ok"],
-            returned_holds=r["held"],
-            part_ok=r["returned_ok"],
-            candidates=r["candidates"],
-            solve_times=[c["times"].get("solve", 0.0) for c in r["candidate_summaries"]],
-            plan_time=r["plan_time"],
-            error=r["error"],
-            candidate_summaries=r["candidate_summaries"],
-            intent_ok=r["intent_ok"],
-        )
-        for r in rows
-        if r["method"] == method and not r["error"]
-    ]
+    try:
+        records = [_benchmark_pair(r) for r in rows if r["method"] == method and not r["error"]]
+    except KeyError as err:
+        raise RecordsError(f"{path}: a record lacks {err}; not eval.benchmark records?") from err
     return records, METHODS[method]["proposer"] == "model"
+
+
+def _benchmark_pair(r: dict) -> PairRecord:
+    """One eval.benchmark record as a PairRecord."""
+    return PairRecord(
+        hand=r["hand"],
+        category=r["category"],
+        seed=r["seed"],
+        instruction=r["instruction"],
+        part=r["part"],
+        first_holds=r["first_ok"],
+        first_part_ok=r["first_ok"],
+        returned_holds=r["held"],
+        part_ok=r["returned_ok"],
+        candidates=r["candidates"],
+        solve_times=[c["times"].get("solve", 0.0) for c in r["candidate_summaries"]],
+        plan_time=r["plan_time"],
+        error=r["error"],
+        candidate_summaries=r["candidate_summaries"],
+        intent_ok=r["intent_ok"],
+    )
 
 
 def with_retry(records: list[PairRecord], deeper: list[PairRecord]) -> list[PairRecord]:
@@ -381,6 +385,8 @@ def main() -> None:
                 raise RecordsError("--retry replays eval.planner_benchmark records only")
             records, labelled = load_benchmark_records(args.records, args.method)
             ordered = True
+        elif args.method is not None:
+            raise RecordsError("--method chooses among eval.benchmark records' methods")
         else:
             records = load_records(args.records)
         if args.retry is not None:
