@@ -133,7 +133,7 @@ def _benchmark_pair(r: dict) -> PairRecord:
         seed=r["seed"],
         instruction=r["instruction"],
         part=r["part"],
-        first_holds=r["first_ok"],
+        first_holds=any(_scored(c)[0] for c in r["candidate_summaries"] if c["validated_as"] == 0),
         first_part_ok=r["first_ok"],
         returned_holds=r["held"],
         part_ok=r["returned_ok"],
@@ -234,6 +234,15 @@ def proposals_used(record: PairRecord, settings: PlannerSettings) -> list[dict]:
     return [c | {"rank": i} for i, c in enumerate(kept)]
 
 
+def _scored(summary: dict) -> tuple[bool, str | None]:
+    """How a recorded candidate is scored: held and the part it touches, as the planner saw it
+    or (eval.benchmark records) on the full, labelled object."""
+    return (
+        bool(summary.get("held_full", summary["success"])),
+        summary.get("touched", summary["part"]),
+    )
+
+
 def replay_pair(
     record: PairRecord, settings: PlannerSettings, labelled: bool = True, ordered: bool = False
 ) -> PairRecord:
@@ -255,12 +264,7 @@ def replay_pair(
             "as proposals)"
         )
     verdicts = {c["rank"]: (bool(c["success"]), c["part"]) for c in recorded}
-    # how a candidate is scored: as the planner saw it, or (eval.benchmark) held on the full
-    # object and the part it touches on the labelled object
-    scored = {
-        c["rank"]: (bool(c.get("held_full", c["success"])), c.get("touched", c["part"]))
-        for c in recorded
-    }
+    scored = {c["rank"]: _scored(c) for c in recorded}
 
     def validate(cand: CandidateResult) -> None:
         cand.success, cand.part = verdicts[cand.rank]
@@ -315,9 +319,7 @@ def any_holds(
     out: dict[str, list[bool]] = {}
     for r in records:
         used = r.candidate_summaries if ordered else proposals_used(r, settings)
-        held = any(
-            c.get("held_full", c["success"]) and c.get("touched", c["part"]) == r.part for c in used
-        )
+        held = any(_scored(c) == (True, r.part) for c in used)
         out.setdefault(r.hand, []).append(held)
     return {hand: sum(v) / len(v) for hand, v in sorted(out.items())}
 

@@ -14,6 +14,12 @@ from planner.settings import ProposalSettings, ScheduleSettings
 TEXT = "Use a mug by handle"
 
 
+def _validated(summaries: list[dict]) -> list[dict]:
+    """The validated candidates' summaries in validation order."""
+    done = (c for c in summaries if c["validated_as"] is not None)
+    return sorted(done, key=lambda c: c["validated_as"])
+
+
 def _record(result, part: str) -> PairRecord:
     return PairRecord(
         hand=result.hand,
@@ -59,10 +65,7 @@ def test_replay_of_all_validated_records_is_the_plan(hand_name, tmp_path):
 
     # the same candidates solved and validated, in the same order, with the same verdicts
     def order(summaries):
-        done = sorted(
-            (c for c in summaries if c["validated_as"] is not None), key=lambda c: c["validated_as"]
-        )
-        return [(c["rank"], c["success"], c["part"]) for c in done]
+        return [(c["rank"], c["success"], c["part"]) for c in _validated(summaries)]
 
     assert order(replayed.candidate_summaries) == order([c.summary() for c in planned.candidates])
     assert [c["rank"] for c in replayed.candidate_summaries] == [c.rank for c in planned.candidates]
@@ -169,15 +172,9 @@ def test_replay_of_a_learned_benchmark_record_is_the_plan(tmp_path):
     assert replayed.first_part_ok == planned.first_ok
     assert replayed.part_ok == planned.returned_ok
     assert replayed.returned_holds == planned.held
-    validated = sorted(
-        (c for c in planned.candidate_summaries if c["validated_as"] is not None),
-        key=lambda c: c["validated_as"],
-    )
-    again = sorted(
-        (c for c in replayed.candidate_summaries if c["validated_as"] is not None),
-        key=lambda c: c["validated_as"],
-    )
-    assert [c["rank"] for c in again] == [c["rank"] for c in validated]
+    assert [c["rank"] for c in _validated(replayed.candidate_summaries)] == [
+        c["rank"] for c in _validated(planned.candidate_summaries)
+    ]
 
 
 def test_an_unlabelled_plan_stops_at_the_first_grasp_that_holds_anywhere():
