@@ -83,6 +83,11 @@ class InteractionConfig:
     # joint_slots: the direct-diffusion ablation)
     target: str = "anchors"
     joint_slots: int = 24
+    # condition on whether the grasp meets its instruction's intent definition (the dataset's
+    # intent_ok): training learns every row that holds on its part, each with its flag, and
+    # sampling asks for flag 1, so grasps that miss their intent still teach where the parts
+    # are without being drawn as what the intent asks (configs without it: off)
+    intent_flag: bool = False
 
     def __post_init__(self) -> None:
         if self.target not in TARGETS:
@@ -372,6 +377,8 @@ class InteractionNet(nn.Module):
         self.text_proj = nn.Sequential(nn.Linear(c.text_dim, d), nn.GELU(), nn.Linear(d, d))
         self.null_text = nn.Parameter(torch.zeros(c.text_dim))
         self.kind = nn.Parameter(torch.randn(3, d) * 0.02)  # object / hand / text token types
+        # added to the text's projection: row 0 misses its intent, row 1 meets it
+        self.met = nn.Parameter(torch.randn(2, d) * 0.02) if c.intent_flag else None
         self.time = nn.Sequential(nn.Linear(d, d), nn.GELU(), nn.Linear(d, d))
         self.glob = nn.Linear(3 * d, d)
         self.wrist_in = nn.Linear(9, d)
@@ -400,10 +407,13 @@ class InteractionNet(nn.Module):
         text: torch.Tensor,
         drop_text: torch.Tensor | None = None,
         hand_index: torch.Tensor | None = None,
+        met: torch.Tensor | None = None,
     ) -> Condition:
         """Object (B, P, 3), hands (H, 512, 3), text (B, 384) -> condition. Row i uses hand
         hand_index[i] (default: the one hand, H = 1); rows where drop_text is True see the
-        learned null text instead (classifier-free guidance)."""
+        learned null text instead (classifier-free guidance). `met` (B,) bool: whether each
+        row's grasp meets its intent (models with `intent_flag`; default True, what sampling
+        asks for); it is part of the instruction, so dropped with it."""
         b = obj_xyz.shape[0]
         ot, _, og = self.object_enc(obj_xyz, obj_groups)
         ht, _, hg = self.hand_enc(hand_xyz, hand_groups)
@@ -414,6 +424,13 @@ class InteractionNet(nn.Module):
         if drop_text is not None:
             text = torch.where(drop_text[:, None], self.null_text[None].expand(b, -1), text)
         tt = self.text_proj(text)
+        if self.met is not None:
+            if met is None:
+                met = torch.ones(b, dtype=torch.bool)
+            flag = self.met[met.long()]
+            if drop_text is not None:
+                flag = torch.where(drop_text[:, None], torch.zeros_like(flag), flag)
+            tt = tt + flag
         tokens = torch.cat(
             [ot + self.kind[0], ht + self.kind[1], (tt + self.kind[2]).unsqueeze(1)], dim=1
         )
@@ -542,8 +559,16 @@ class InteractionModel:
         return cls(net, config, cfg.get("info", {}))
 
     def condition(
-        self, prepared: list[Prepared], hand: Any, text_vecs: np.ndarray, drop: bool = False
+        self,
+        prepared: list[Prepared],
+        hand: Any,
+        text_vecs: np.ndarray,
+        drop: bool = False,
+        met: bool = True,
     ) -> Condition:
+        """The encoded condition of prepared clouds with the hand and text embeddings; `drop`:
+        the null text (guidance's unconditional half); `met`: a model with `intent_flag` is
+        asked for grasps that meet (True) or miss their intent."""
         hxyz, hgroups = hand_points(hand, self.config)
         obj = torch.from_numpy(np.stack([p.xyz for p in prepared])).float()
         groups = {
@@ -553,7 +578,10 @@ class InteractionModel:
         hgt = {k: v[None] for k, v in hgroups.tensors().items()}
         txt = torch.from_numpy(np.asarray(text_vecs, dtype=np.float32))
         dropped = torch.full((len(prepared),), drop) if drop else None
-        return self.net.encode(obj, groups, torch.from_numpy(hxyz).float()[None], hgt, txt, dropped)
+        flags = torch.full((len(prepared),), met)
+        return self.net.encode(
+            obj, groups, torch.from_numpy(hxyz).float()[None], hgt, txt, dropped, met=flags
+        )
 
     @torch.no_grad()
     def sample_prepared(

@@ -308,6 +308,9 @@ class Batcher:
                 "every training grasp misses its intent and --unmet-weight is 0: raise it"
             )
         self.row_weights = weights / weights.sum()
+        # whether each row's grasp meets the intent of the text it is learned under (a model
+        # with `intent_flag` is told; unknown counts as met, as the planner counts it)
+        self.met = ~unmet_intent(data, rows, instr)
         # paraphrases per instruction: index 0 is the canonical text
         self.texts: list[list[str]] = []
         self.generic: list[list[str]] = []  # the same requests naming no category
@@ -393,6 +396,7 @@ class Batcher:
             "x": torch.from_numpy(np.stack(xs)).float(),
             "text": torch.from_numpy(np.stack(texts)).float(),
             "hand": torch.from_numpy(self.hand_index[picks]),
+            "met": torch.from_numpy(self.met[picks]),
         }
 
 
@@ -415,6 +419,7 @@ def batch_loss(
         batch["text"],
         dropped,
         hand_index=batch["hand"],
+        met=batch["met"],
     )
     x0 = (batch["x"] - net.x_mean) / net.x_std
     return net.loss(x0.repeat_interleave(repeats, 0), cond.repeat(repeats), generator)
@@ -513,6 +518,11 @@ def train(
     torch.set_num_threads(settings.threads)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
+    if config.intent_flag and not settings.all_rows:
+        raise DatasetError(
+            "--intent-flag tells the model which grasps miss their intent, which only "
+            "--all-rows keeps: add --all-rows or drop --intent-flag"
+        )
     train_data = load_split(data, "train", settings.blocks)
     rows, texts = training_pairs(train_data, settings.all_rows, settings.relabel)
     if len(rows) == 0:
@@ -621,6 +631,7 @@ def train(
     final = InteractionModel.new(config, settings.seed)
     target = "" if config.target == "anchors" else f" --target {config.target}"
     target += " --all-rows" if settings.all_rows else ""
+    target += " --intent-flag" if config.intent_flag else ""
     target += " --relabel" if settings.relabel else ""
     if settings.anchors_on_part != TrainSettings.anchors_on_part:
         target += f" --anchors-on-part {settings.anchors_on_part}"

@@ -433,3 +433,54 @@ def test_interaction_benchmark_scores_the_splits_own_anchors_as_it_scores_sample
     shares = data_part_accuracy(data, [("mug", 3)], ["allegro", "leap"], cache)
     assert shares == {"allegro": 0.5, "leap": 1.0, "all": pytest.approx(2 / 3)}
     assert data_part_accuracy(data, [("mug", 4)], ["allegro"], cache) == {}
+
+
+def test_intent_flag_conditions_the_model_is_dropped_with_the_text_and_round_trips(
+    tmp_path: Path, mug: np.ndarray
+) -> None:
+    flagged = InteractionModel.new(replace(TINY, intent_flag=True), seed=0)
+    prep = prepare_cloud(mug, flagged.config)
+    vec = encode(["Hold a mug by body"])
+
+    def glob(met: bool, drop: bool = False) -> torch.Tensor:
+        return flagged.condition([prep], "leap", vec, drop=drop, met=met).glob
+
+    # the flag changes the condition; sampling asks for "meets" (the default)
+    assert not torch.allclose(glob(True), glob(False))
+    assert torch.equal(flagged.condition([prep], "leap", vec).glob, glob(True))
+    # with the text dropped (classifier-free guidance's other half) the flag is dropped too
+    assert torch.equal(glob(True, drop=True), glob(False, drop=True))
+    flagged.save(str(tmp_path))
+    loaded = InteractionModel.load(str(tmp_path))
+    assert loaded.config.intent_flag and torch.equal(loaded.net.met, flagged.net.met)
+    # a config written before the option loads without it, and has no flag parameters
+    old = {k: v for k, v in TINY.to_json().items() if k != "intent_flag"}
+    assert InteractionConfig.from_json(old).intent_flag is False
+    assert InteractionModel.new(TINY).net.met is None
+
+
+@pytest.mark.skipif(not DATA.is_dir(), reason="data/grasps_v2 absent")
+def test_intent_flag_needs_all_rows_and_learns_from_each_rows_flag(tmp_path: Path) -> None:
+    from learned.dataset import DatasetError
+    from learned.train_interaction import CHECKPOINT, TrainSettings, train
+    from learned.weights import load_weights
+
+    data, out = tmp_path / "data", tmp_path / "run"
+    _mini_dataset(data)
+    config = replace(TINY, intent_flag=True)
+    settings = TrainSettings(
+        minutes=5, max_steps=3, batch=16, repeats=1, samples_per_object=1, progress=False
+    )
+    with pytest.raises(DatasetError, match="--intent-flag .* --all-rows"):
+        train(data, out, settings, config)
+    settings.all_rows = True
+    result = train(data, out, settings, config)
+    model = InteractionModel.load(str(out))
+    assert model.config.intent_flag and "--intent-flag" in model.info["command"]
+    assert result.steps == 3
+    # both flags occur in the mini dataset's train rows, and both embeddings learn (the live
+    # weights of the checkpoint: the shipped EMA weights move too little in 3 steps to see)
+    assert set(load_split(data, "train").arrays["intent_ok"].tolist()) >= {0, 1}
+    start = InteractionModel.new(config, settings.seed).net.met.detach()
+    live = load_weights(CHECKPOINT, "", out)[0]["net.met"]
+    assert not torch.allclose(live[0], start[0]) and not torch.allclose(live[1], start[1])

@@ -78,6 +78,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="learn also from grasps that miss their intent's definition (intent_ok 0)",
     )
     i.add_argument(
+        "--intent-flag",
+        action="store_true",
+        help="with --all-rows: tell the model whether each grasp meets its intent's "
+        "definition; sampling asks for grasps that meet it",
+    )
+    i.add_argument(
         "--relabel",
         action="store_true",
         help="learn each grasp under every intent it meets on its part (run `drograsp dataset "
@@ -171,7 +177,7 @@ def interaction_setup(args: argparse.Namespace):
     from learned.interaction import InteractionConfig
     from learned.train_interaction import TrainSettings
 
-    config = InteractionConfig(target=args.target)
+    config = InteractionConfig(target=args.target, intent_flag=args.intent_flag)
     if args.width is not None:
         config.width = args.width
     if args.layers is not None:
