@@ -167,6 +167,7 @@ def test_open_mesh_gets_surface_pieces_with_a_warning():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         assert obj.collision_pieces("surface") is pieces  # asked for: no warning, cached
+        assert obj.collision_pieces() is pieces  # warned once per object, not per caller
     with pytest.raises(ObjectError, match="pieces must be one of"):
         obj.pieces = "magic"
 

@@ -163,14 +163,15 @@ class ObjectModel:
             elif self.mesh.is_watertight:
                 method = "coacd"
             else:
-                warnings.warn(
-                    f"{self.name}: the mesh is open (not watertight), and CoACD may never finish "
-                    "on an open mesh; using pieces from its surface samples instead (close the "
-                    "mesh's holes for CoACD's pieces)",
-                    OpenMeshWarning,
-                    stacklevel=2,
-                )
                 method = "surface"
+                if "pieces-surface" not in self._derived:  # once per object, not per caller
+                    warnings.warn(
+                        f"{self.name}: the mesh is open (not watertight), and CoACD may never "
+                        "finish on an open mesh; using pieces from its surface samples instead "
+                        "(close the mesh's holes for CoACD's pieces)",
+                        OpenMeshWarning,
+                        stacklevel=2,
+                    )
         if method not in PIECE_METHODS:
             raise ObjectError(f"unknown method {method!r}: one of {', '.join(PIECE_METHODS)}")
         key = f"pieces-{method}"
