@@ -302,7 +302,8 @@ class Batcher:
         self.instr_index = np.array([self.instr_names.index(t) for t in instr])
         counts = np.bincount(self.instr_index, minlength=len(self.instr_names))
         weights = counts[self.instr_index].astype(np.float64) ** -settings.balance
-        weights *= np.where(unmet_intent(data, rows, instr), settings.unmet_weight, 1.0)
+        unmet = unmet_intent(data, rows, instr)
+        weights *= np.where(unmet, settings.unmet_weight, 1.0)
         if not weights.sum() > 0:
             raise DatasetError(
                 "every training grasp misses its intent and --unmet-weight is 0: raise it"
@@ -310,7 +311,7 @@ class Batcher:
         self.row_weights = weights / weights.sum()
         # whether each row's grasp meets the intent of the text it is learned under (a model
         # with `intent_flag` is told; unknown counts as met, as the planner counts it)
-        self.met = ~unmet_intent(data, rows, instr)
+        self.met = ~unmet
         # paraphrases per instruction: index 0 is the canonical text
         self.texts: list[list[str]] = []
         self.generic: list[list[str]] = []  # the same requests naming no category

@@ -153,6 +153,7 @@ class ObjectModel:
         limit, cached on disk), "surface" (cloud pieces from the mesh's surface samples, in
         about a second) or "cloud" (from surface points).
         """
+        open_mesh = False  # "auto" chose surface pieces for an open mesh: warn
         if method == "auto" and self.pieces != "auto":
             method = self.pieces
         if method == "auto":
@@ -164,17 +165,18 @@ class ObjectModel:
                 method = "coacd"
             else:
                 method = "surface"
-                if "pieces-surface" not in self._derived:  # once per object, not per caller
-                    warnings.warn(
-                        f"{self.name}: the mesh is open (not watertight), and CoACD may never "
-                        "finish on an open mesh; using pieces from its surface samples instead "
-                        "(close the mesh's holes for CoACD's pieces)",
-                        OpenMeshWarning,
-                        stacklevel=2,
-                    )
+                open_mesh = True
         if method not in PIECE_METHODS:
             raise ObjectError(f"unknown method {method!r}: one of {', '.join(PIECE_METHODS)}")
         key = f"pieces-{method}"
+        if open_mesh and key not in self._derived:  # once per object, not per caller
+            warnings.warn(
+                f"{self.name}: the mesh is open (not watertight), and CoACD may never finish "
+                "on an open mesh; using pieces from its surface samples instead (close the "
+                "mesh's holes for CoACD's pieces)",
+                OpenMeshWarning,
+                stacklevel=2,
+            )
         if key not in self._derived:
             if method == "construction":
                 if self.construction_pieces is None:
