@@ -12,7 +12,8 @@ Per hand, on rows of the split (a fixed random sample per hand):
   planner.learned_proposer.MIN_CLOSENESS);
 - for the first `--validate` rows: the Drake grasp program with the dataset anchors (and the
   object's normals there), the dataset wrist as its prior and the targets weighted by
-  predicted closeness (GraspTargets.point_weights), started from the open pose;
+  predicted closeness (GraspTargets.point_weights), started where the planner starts a
+  sample's fingers (planner.learned_proposer.sample_start);
   joint error vs the dataset grasp (mean |q - q_grasp| in degrees over the hand's joints) and
   first-try validated success (the first solve, pregrasp, squeeze and MuJoCo validation as
   the planner runs them, `--protocol`, default paper);
@@ -43,7 +44,7 @@ from models.hands import load_hand
 from models.objects import make_object
 from planner.functional import finish_grasp
 from planner.grasp_program import GraspTargets, grasp_program
-from planner.learned_proposer import MIN_CLOSENESS
+from planner.learned_proposer import MIN_CLOSENESS, sample_start
 
 NEAR = 0.05  # m
 
@@ -166,7 +167,7 @@ def _solve_and_validate(
     solved = program.solve(
         GraspTargets(
             data.wrist[r],
-            hand.open_pose,
+            sample_start(hand),
             anchors=anchors,
             anchor_normals=obj.normals[nearest],
             point_index=keep,

@@ -37,6 +37,7 @@ from planner.learned_proposer import (
     fitted,
     learned_proposals,
     region_object,
+    sample_start,
 )
 from planner.model_proposer import HandGeometry, ModelProposer
 from planner.quality import contact_quality
@@ -181,8 +182,8 @@ class FunctionalPlanner:
                     key,
                     weights=s.learned.dro_weights,
                 )
-            if drawn.q is None:  # the program starts from the open pose
-                q = self.hand.open_pose.astype(np.float64).copy()
+            if drawn.q is None:  # the program starts from the hand's start for samples
+                q = sample_start(self.hand)
             else:
                 q = rounded(drawn.q[i])
             proposals.append(

@@ -4,8 +4,8 @@ The interaction model (learned.interaction) draws wrist poses and four contact a
 cloud, sentence and hand; the D(R,O) network (learned.dro) turns each wrist and its anchors
 into targets for the hand's surface points (multilateration + per-body Kabsch, weighted by how
 near contact each point is predicted). Both go to the same grasp program as the model-based
-proposals (planner.functional): anchors with their surface normals, the open pose as the
-starting configuration, and the point targets the program pulls toward (`point_weights`:
+proposals (planner.functional): anchors with their surface normals, the hand's start for
+samples as the starting configuration (`sample_start`), and the point targets the program pulls toward (`point_weights`:
 closeness, so far points weigh little). The samples are solved best anchor closure first, as
 the model-based ones. `fitted` is the ablation without Drake (`PlannerSettings.learned.solver`
 "fit"): the joints fitted to the targets with no collision constraints. `direct_proposals` and
@@ -65,7 +65,7 @@ class LearnedProposals:
     anchors: np.ndarray  # (n, 4, 3)
     normals: np.ndarray  # (n, 4, 3)
     times: dict[str, float]
-    q: np.ndarray | None = None  # (n, dof): direct diffusion's joints (None: the open pose)
+    q: np.ndarray | None = None  # (n, dof): direct diffusion's joints (None: `sample_start`)
 
 
 def learned_proposals(
@@ -91,6 +91,18 @@ def learned_proposals(
     times = {"interaction": time.perf_counter() - t0}
     _, normals = surface_at(obj, anchors)
     return LearnedProposals(wrists, anchors, normals, times)
+
+
+def sample_start(hand: HandModel) -> np.ndarray:
+    """Where the grasp program starts a learned sample's fingers: the open pose closed by the
+    hand's `learned_start_closure` (hand.json; 0: the open pose itself). With the dataset's wrist
+    and anchors on 120-150 validation rows per hand, starting closed held more grasps at the
+    first try for Allegro and Shadow and fewer for LEAP (docs/learned_log.md, "Where the solve
+    starts")."""
+    fraction = hand.meta.learned_start_closure
+    if fraction == 0:
+        return hand.open_pose.astype(np.float64).copy()
+    return rounded_within(hand.closed_pose(fraction), hand.lower, hand.upper)
 
 
 def surface_at(obj: ObjectModel, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -31,6 +31,10 @@ from planner.quality import contact_quality
 from planner.results import Proposal
 from planner.settings import PlannerSettings
 
+# Where the model-based proposals start the fingers: the open pose closed this fraction of each
+# joint's range (HandModel.closed_pose)
+HALF_CLOSURE = 0.35
+
 
 @dataclass(frozen=True)
 class _Shape:
@@ -56,9 +60,7 @@ class HandGeometry:
 
     def __init__(self, hand: HandModel):
         self.hand = hand
-        closing = hand.closing_direction
-        span = hand.upper - hand.lower
-        self.q_half = rounded_within(hand.open_pose + 0.35 * closing * span, hand.lower, hand.upper)
+        self.q_half = rounded_within(hand.closed_pose(HALF_CLOSURE), hand.lower, hand.upper)
         names = list(hand.meta.anchor_fingers)
         identity = torch.tensor([[0, 0, 0, 1.0, 0, 0, 0]], dtype=torch.float64)
         half = hand.fingertip_positions(identity, torch.tensor(self.q_half[None]), names)[0].numpy()

@@ -727,6 +727,10 @@ def _user_hand(tmp_path, name="mine", meta_change=None, urdf_change=None):
             lambda m: m | {"open_pose": {**m["open_pose"], "ffj0": 3.0}},
             "open_pose is outside the joint limits .* ffj0 3",
         ),
+        (
+            lambda m: m | {"learned_start_closure": 1.0},
+            r"learned_start_closure must be a number from 0 .* got 1.0",
+        ),
     ],
 )
 def test_user_hand_json_faults_are_named(tmp_path, change, message):

@@ -13,10 +13,11 @@ from scipy.spatial import cKDTree
 
 from learned.understand import named_intents, understand
 from models.errors import InstructionError, PlanningError
+from models.hands import load_hand
 from models.objects import load_object, make_object
 from planner import plan_grasp
 from planner.functional import FunctionalPlanner, PlannerSettings
-from planner.learned_proposer import pointed_region
+from planner.learned_proposer import pointed_region, sample_start
 from planner.settings import LearnedSettings, ScheduleSettings
 from tests.tiny_models import TINY_INTERACTION
 
@@ -60,6 +61,9 @@ def test_an_unlabelled_cloud_and_a_sentence_are_planned(hand_name):
     assert result.candidates[: len(samples)] == samples
     qualities = [c.proposal.anchor_quality for c in samples]
     assert qualities == sorted(qualities, reverse=True)
+    # the fingers start where the hand's files say samples start
+    start = sample_start(load_hand(hand_name))
+    assert all(np.array_equal(c.proposal.q, start) for c in samples)
     # D(R,O)'s point targets reach the program, with weights from its predicted closeness
     p = result.candidates[0].proposal
     assert len(p.point_index) == len(p.point_targets) == len(p.point_weights) > 0
@@ -67,6 +71,26 @@ def test_an_unlabelled_cloud_and_a_sentence_are_planned(hand_name):
     validated = [c for c in result.candidates if c.order is not None]
     assert validated and all(c.part is None for c in validated)  # no labels: no part vote
     assert "interaction" in result.stage_times() and "dro" in result.stage_times()
+
+
+@pytest.mark.parametrize("hand_name", ["allegro", "leap", "shadow"])
+def test_samples_start_closed_by_the_hands_own_fraction(hand_name):
+    hand = load_hand(hand_name)
+    assert np.array_equal(hand.closed_pose(0.0), hand.open_pose)
+    closed = hand.closed_pose(0.35)
+    assert np.all((closed >= hand.lower) & (closed <= hand.upper))
+    moved = closed - hand.open_pose
+    fixed = hand.closing_direction == 0
+    assert np.all(moved[fixed] == 0)  # joints with no closing direction stay open
+    # the others move toward their closing limit, 0.35 of the range or up to the limit
+    toward = np.sign(moved[~fixed]) == hand.closing_direction[~fixed]
+    at_limit = np.isclose(closed, hand.lower) | np.isclose(closed, hand.upper)
+    assert np.all(toward | (moved[~fixed] == 0) & at_limit[~fixed])
+    start = sample_start(hand)
+    fraction = hand.meta.learned_start_closure
+    assert np.allclose(start, hand.closed_pose(fraction), atol=1e-9)
+    if fraction == 0:
+        assert np.array_equal(start, hand.open_pose)
 
 
 def test_the_region_follows_the_anchors_of_most_samples():

@@ -105,6 +105,14 @@ class HandMeta:
     # that turn in the fingers at the first squeeze, and lost no pair, where the deeper squeeze
     # for every grasp loses others (docs/planner_log.md, "Squeeze retry").
     retry_squeeze_depth: float | None
+    # Where the grasp program starts the fingers of a learned sample: the open pose closed this
+    # fraction of each joint's range along its closing direction (HandModel.closed_pose; the
+    # model-based proposals start at 0.35). From the open pose at a power grasp's wrist the hand
+    # starts inside the part and the program pushes the wrist away (13-17 cm on Shadow's hammer
+    # handles); LEAP's fingers, closed, start across each other. Measured per hand with the
+    # dataset's wrist and anchors on the validation split (docs/learned_log.md, "Where the
+    # solve starts"); default 0, the open pose.
+    learned_start_closure: float
     source: str  # where the kinematics come from (for provenance and vendor checks)
     # Joints driven together by one actuator (empty: one position actuator per joint).
     couplings: tuple[Coupling, ...] = ()
@@ -126,6 +134,7 @@ OPTIONAL_FIELDS = (
     "pregrasp_clearance",
     "squeeze_depth",
     "retry_squeeze_depth",
+    "learned_start_closure",
     "couplings",
     "joint_dynamics",
     "program_hull_links",
@@ -378,6 +387,12 @@ def read_meta(path: Path) -> HandMeta:
                 f"({closing_motion['squeeze_depth']}), got {retry!r}"
             )
         retry = float(retry)
+    start = raw.get("learned_start_closure", 0.0)
+    if not _finite_number(start) or not 0 <= start < 1:
+        raise HandError(
+            f"{path}: learned_start_closure must be a number from 0 (the open pose) up to, not "
+            f"including, 1 (every joint at its closing limit), got {start!r}"
+        )
     couplings = _couplings(raw.get("couplings", []), joints, open_pose, path)
     return HandMeta(
         name=name,
@@ -402,6 +417,7 @@ def read_meta(path: Path) -> HandMeta:
         pinch_proposals=pinches,
         **closing_motion,
         retry_squeeze_depth=retry,
+        learned_start_closure=float(start),
         source=source,
         couplings=couplings,
     )

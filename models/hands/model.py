@@ -152,6 +152,16 @@ class HandModel:
     def closing_direction(self) -> np.ndarray:
         return np.array([self.meta.closing_direction[n] for n in self.joint_names], dtype=float)
 
+    def closed_pose(self, fraction: float) -> np.ndarray:
+        """The open pose with every joint moved `fraction` of its range (upper - lower) along
+        its closing direction, within the limits: where the grasp program starts the fingers
+        (0.35 for the model-based proposals, hand.json `learned_start_closure` for the learned
+        samples), so they start around a part rather than flat against it."""
+        span = self.upper - self.lower
+        return np.clip(
+            self.open_pose + fraction * self.closing_direction * span, self.lower, self.upper
+        )
+
     @cached_property
     def coupling_basis(self) -> np.ndarray:
         """(dof, m): every joint configuration the planner may use is basis @ s. One column per
