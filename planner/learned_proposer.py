@@ -5,8 +5,8 @@ cloud, sentence and hand; the D(R,O) network (learned.dro) turns each wrist and 
 into targets for the hand's surface points (multilateration + per-body Kabsch, weighted by how
 near contact each point is predicted). Both go to the same grasp program as the model-based
 proposals (planner.functional): anchors with their surface normals, the hand's start for
-samples as the starting configuration (`sample_start`), and the point targets the program pulls toward (`point_weights`:
-closeness, so far points weigh little). The samples are solved best anchor closure first, as
+samples as the starting configuration (`sample_start`), and the point targets the program
+pulls toward (`point_weights`: closeness, so far points weigh little). The samples are solved best anchor closure first, as
 the model-based ones. `fitted` is the ablation without Drake (`PlannerSettings.learned.solver`
 "fit"): the joints fitted to the targets with no collision constraints. `direct_proposals` and
 `as_drawn` are the ablation of direct diffusion (`PlannerSettings.proposer` "direct"): wrist and
