@@ -1,13 +1,15 @@
 """Do the project's hands judge the planner's own grasps as DexGraspBench's hand files do?
 
-For test-split (object, instruction) pairs, per hand: plan with the model-based planner, keep
-every candidate it validated, and validate each of those grasps twice under DexGraspBench's
+For test-split (object, instruction) pairs, per hand: plan with the model-based planner (given
+the part labels) or the learned pipeline (`--proposer learned`: the object without its labels,
+as eval.benchmark's learned methods see it), keep every candidate it validated, and validate each of those grasps twice under DexGraspBench's
 protocol: once with the project's hand (models/hands/<hand>) and once with DexGraspBench's hand
 file (the grasp converted to that file's root frame and joint order, as `drograsp export
 dexgraspbench` writes it and `drograsp validate --hand-xml` reads it). The table reports each
 verdict's success rate and how often the two agree.
 
     python -m eval.agreement --objects-per-category 1 --workers 2 --out agreement.jsonl
+    python -m eval.agreement --proposer learned --workers 2 --out agreement_learned.jsonl
 
 Needs DexGraspBench's hand files (`--hand-files`, default ../shared/reference/dexgraspbench/hand
 beside the repository), named <hand>_right_hand.xml.
@@ -25,6 +27,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from eval.benchmark import unlabelled
 from models.grasp import Grasp, from_dexgraspbench, to_dexgraspbench
 from models.hands import available_hands
 from models.hands.mjcf_frame import mjcf_root_offset
@@ -59,6 +62,7 @@ class PairVerdicts:
     category: str
     seed: int
     instruction: str
+    proposer: str = "model"
     candidates: list[CandidateVerdicts] = field(default_factory=list)
     error: str = ""
 
@@ -80,15 +84,21 @@ def as_hand_file_grasp(grasp: Grasp, hand: str, xml: Path) -> Grasp:
     )
 
 
-def judge_pair(job: tuple[str, str, int, str, str, int]) -> PairVerdicts:
-    hand, category, seed, text, hand_files, max_candidates = job
-    record = PairVerdicts(hand, category, seed, text)
+Job = tuple[str, str, int, str, str, int, str]  # hand, category, seed, text, files, cands, proposer
+
+
+def judge_pair(job: Job) -> PairVerdicts:
+    """Plan one pair and judge every validated candidate on both hands."""
+    hand, category, seed, text, hand_files, max_candidates, proposer = job
+    record = PairVerdicts(hand, category, seed, text, proposer)
     xml = Path(hand_files) / f"{hand}_right_hand.xml"
     try:
-        settings = PlannerSettings(schedule=ScheduleSettings(max_candidates=max_candidates))
+        settings = PlannerSettings(
+            proposer=proposer, schedule=ScheduleSettings(max_candidates=max_candidates)
+        )
         planner = FunctionalPlanner(hand, settings)
         obj = make_object(category, seed)
-        result = planner.plan(obj, text)
+        result = planner.plan(obj if proposer == "model" else unlabelled(obj), text)
         pieces = obj.collision_pieces()
         vendor_hand = mjcf_hand(xml)
         best = result.best
@@ -121,12 +131,17 @@ def judge_pair(job: tuple[str, str, int, str, str, int]) -> PairVerdicts:
 
 
 def jobs(
-    split: str, per_category: int, hands: Sequence[str], hand_files: Path, max_candidates: int
-) -> list[tuple[str, str, int, str, str, int]]:
+    split: str,
+    per_category: int,
+    hands: Sequence[str],
+    hand_files: Path,
+    max_candidates: int,
+    proposer: str = "model",
+) -> list[Job]:
     from eval.planner_benchmark import pairs
 
     return [
-        (hand, cat, seed, text, str(hand_files), max_candidates)
+        (hand, cat, seed, text, str(hand_files), max_candidates, proposer)
         for hand, cat, seed, text in pairs(split, per_category, list(hands))
     ]
 
@@ -179,6 +194,13 @@ def main() -> None:
     parser.add_argument("--objects-per-category", type=int, default=1)
     parser.add_argument("--hands", nargs="+", default=available_hands())
     parser.add_argument("--candidates", type=int, default=8)
+    parser.add_argument(
+        "--proposer",
+        choices=("model", "learned"),
+        default="model",
+        help="model: the model-based planner given the part labels; learned: the learned "
+        "pipeline on the object without labels",
+    )
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--limit", type=int, default=None, help="first N pairs per hand")
     parser.add_argument("--hand-files", type=Path, default=HAND_FILES)
@@ -190,7 +212,14 @@ def main() -> None:
             f"no DexGraspBench hand file for {missing} in {args.hand_files} "
             "(<hand>_right_hand.xml); pass --hand-files"
         )
-    work = jobs(args.split, args.objects_per_category, args.hands, args.hand_files, args.candidates)
+    work = jobs(
+        args.split,
+        args.objects_per_category,
+        args.hands,
+        args.hand_files,
+        args.candidates,
+        args.proposer,
+    )
     if args.limit:
         work = [j for h in args.hands for j in [j for j in work if j[0] == h][: args.limit]]
     records: list[PairVerdicts] = []
@@ -202,7 +231,8 @@ def main() -> None:
                 out.write(json.dumps(asdict(rec)) + "\n")
                 out.flush()
     print(
-        f"split {args.split}, {args.objects_per_category} object(s) per category, every "
+        f"split {args.split}, {args.objects_per_category} object(s) per category, "
+        f"{args.proposer} proposer, every "
         f"validated candidate, DexGraspBench protocol on the project's hand and on its hand file"
     )
     print_table(summarize(records))
