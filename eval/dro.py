@@ -42,9 +42,11 @@ from learned.dro import PLACEMENTS, load_weights, predict
 from learned.train_dro import prepare
 from models.hands import load_hand
 from models.objects import make_object
+from planner.commands.validate import parse_overrides
 from planner.functional import finish_grasp
-from planner.grasp_program import GraspTargets, grasp_program
+from planner.grasp_program import GraspTargets, ProgramSettings, grasp_program
 from planner.learned_proposer import MIN_CLOSENESS, sample_start
+from planner.settings import PlannerSettings, with_overrides
 
 NEAR = 0.05  # m
 
@@ -102,6 +104,7 @@ def evaluate(
     seed: int = 0,
     anchors_only: bool = False,
     placement: str = "multilateration",
+    program: ProgramSettings | None = None,
 ) -> dict:
     torch.set_num_threads(1)
     ckpt = load_weights(weights)
@@ -137,7 +140,7 @@ def evaluate(
             headed = np.linalg.norm(pred.headed - truth.numpy(), axis=1) * 1000
             rec.headed_error_near_mm.extend(headed[close.any(axis=1)].tolist())
             if n_done < validate:
-                _solve_and_validate(rec, hand, data, r, pred, protocol, anchors_only)
+                _solve_and_validate(rec, hand, data, r, pred, protocol, anchors_only, program)
     meta = dict(ckpt.meta)
     return {
         "split": split,
@@ -145,6 +148,7 @@ def evaluate(
         "trained_on": meta.get("hands"),
         "weights_meta": meta,
         "anchors_only": anchors_only,
+        "program": asdict(program) if program is not None else "default",
         "placement": placement,
         "hands": [records[h].summary() for h in sorted(records)],
         "config": asdict(net.cfg),
@@ -152,13 +156,20 @@ def evaluate(
 
 
 def _solve_and_validate(
-    rec: HandRecord, hand, data, r: int, pred, protocol: str, anchors_only: bool
+    rec: HandRecord,
+    hand,
+    data,
+    r: int,
+    pred,
+    protocol: str,
+    anchors_only: bool,
+    program_settings: ProgramSettings | None = None,
 ) -> None:
     """Drake with the dataset anchors and the predicted point targets (none with
     `anchors_only`: the comparison without D(R,O)), then the planner's pregrasp, squeeze and
     MuJoCo validation on the first solve."""
     obj = make_object(data.categories[r], int(data.seeds[r]))
-    program = grasp_program(hand, obj.collision_pieces())
+    program = grasp_program(hand, obj.collision_pieces(), program_settings)
     anchors = data.anchors[r]
     nearest = np.argmin(np.linalg.norm(obj.points[None] - anchors[:, None], axis=2), axis=1)
     keep = np.flatnonzero(pred.closeness > MIN_CLOSENESS)  # what D(R,O) says is near contact
@@ -242,7 +253,20 @@ def main(argv: list[str] | None = None) -> int:
         default="multilateration",
         help="how distances become targets (learned.dro.predict; default: the planner's)",
     )
+    parser.add_argument(
+        "--set",
+        nargs="*",
+        default=[],
+        metavar="program.KEY=VALUE",
+        help="grasp program settings for the solves (planner.grasp_program.ProgramSettings), "
+        "e.g. program.point_weight=5",
+    )
     args = parser.parse_args(argv)
+    overrides = parse_overrides(args.set)
+    other = [k for k in overrides if not k.startswith("program.")]
+    if other:
+        parser.error(f"--set takes program.* settings only (the solve's), not {other}")
+    program = with_overrides(PlannerSettings(), overrides).program if overrides else None
     start = time.perf_counter()
     result = evaluate(
         args.data,
@@ -254,6 +278,7 @@ def main(argv: list[str] | None = None) -> int:
         args.hands,
         anchors_only=args.anchors_only,
         placement=args.placement,
+        program=program,
     )
     result["wall_s"] = round(time.perf_counter() - start, 1)
     print(_table(result))

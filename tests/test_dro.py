@@ -319,3 +319,28 @@ def test_training_without_anchors_stops_at_its_steps(tmp_path, monkeypatch):
         assert np.all(cache["obj"][..., 3] == 0)
     train_dro.train(replace(cfg, steps=2), progress=False)  # resumes: same settings
     assert load_weights(weights).meta["steps"] == 2
+
+
+def test_eval_dro_solves_with_the_program_settings_it_is_given(monkeypatch):
+    """`python -m eval.dro --set program.KEY=VALUE` reaches the grasp program of every solve;
+    other settings are refused (nothing else of the planner runs there)."""
+    from eval import dro as eval_dro
+
+    seen = []
+
+    class Reached(Exception):
+        pass
+
+    def capture(hand, pieces, settings=None):
+        seen.append(settings)
+        raise Reached
+
+    monkeypatch.setattr(eval_dro, "grasp_program", capture)
+    args = ["--split", "test", "--rows-per-hand", "1", "--validate", "1", "--hands", "allegro"]
+    with pytest.raises(Reached):
+        eval_dro.main([*args, "--set", "program.point_weight=2.5"])
+    assert seen[0].point_weight == 2.5
+    with pytest.raises(SystemExit):
+        eval_dro.main([*args, "--set", "schedule.solve_batch=2"])
+    with pytest.raises(DrograspError, match="unknown planner setting"):
+        eval_dro.main([*args, "--set", "program.no_such_weight=1"])
