@@ -1,12 +1,12 @@
 """Do the project's hands judge the planner's own grasps as DexGraspBench's hand files do?
 
-For test-split (object, instruction) pairs, per hand: plan with the model-based planner (given
-the part labels) or the learned pipeline (`--proposer learned`: the object without its labels,
-as eval.benchmark's learned methods see it), keep every candidate it validated, and validate each of those grasps twice under DexGraspBench's
-protocol: once with the project's hand (models/hands/<hand>) and once with DexGraspBench's hand
-file (the grasp converted to that file's root frame and joint order, as `drograsp export
-dexgraspbench` writes it and `drograsp validate --hand-xml` reads it). The table reports each
-verdict's success rate and how often the two agree.
+For test-split (object, instruction) pairs, per hand: plan with the model-based planner (given the
+part labels) or the learned pipeline (`--proposer learned`: the object without its labels, as
+eval.benchmark's learned methods see it), keep every candidate it validated, and validate each of
+those grasps twice under DexGraspBench's protocol: once with the project's hand
+(models/hands/<hand>) and once with DexGraspBench's hand file (the grasp converted to that file's
+root frame and joint order, as `drograsp export dexgraspbench` writes it and `drograsp validate
+--hand-xml` reads it). The table reports each verdict's success rate and how often the two agree.
 
     python -m eval.agreement --objects-per-category 1 --workers 2 --out agreement.jsonl
     python -m eval.agreement --proposer learned --workers 2 --out agreement_learned.jsonl

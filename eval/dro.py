@@ -148,7 +148,7 @@ def evaluate(
         "trained_on": meta.get("hands"),
         "weights_meta": meta,
         "anchors_only": anchors_only,
-        "program": asdict(program) if program is not None else "default",
+        "program": asdict(program or ProgramSettings()),
         "placement": placement,
         "hands": [records[h].summary() for h in sorted(records)],
         "config": asdict(net.cfg),
@@ -266,7 +266,7 @@ def main(argv: list[str] | None = None) -> int:
     other = [k for k in overrides if not k.startswith("program.")]
     if other:
         parser.error(f"--set takes program.* settings only (the solve's), not {other}")
-    program = with_overrides(PlannerSettings(), overrides).program if overrides else None
+    program = with_overrides(PlannerSettings(), overrides).program
     start = time.perf_counter()
     result = evaluate(
         args.data,

@@ -1,16 +1,16 @@
 """Proposals from the learned stages: no part labels needed, any sentence.
 
 The interaction model (learned.interaction) draws wrist poses and four contact anchors for the
-cloud, sentence and hand; the D(R,O) network (learned.dro) turns each wrist and its anchors
-into targets for the hand's surface points (multilateration + per-body Kabsch, weighted by how
-near contact each point is predicted). Both go to the same grasp program as the model-based
-proposals (planner.functional): anchors with their surface normals, the hand's start for
-samples as the starting configuration (`sample_start`), and the point targets the program
-pulls toward (`point_weights`: closeness, so far points weigh little). The samples are solved best anchor closure first, as
-the model-based ones. `fitted` is the ablation without Drake (`PlannerSettings.learned.solver`
-"fit"): the joints fitted to the targets with no collision constraints. `direct_proposals` and
-`as_drawn` are the ablation of direct diffusion (`PlannerSettings.proposer` "direct"): wrist and
-joints drawn by one model and validated as drawn.
+cloud, sentence and hand; the D(R,O) network (learned.dro) turns each wrist and its anchors into
+targets for the hand's surface points (multilateration + per-body Kabsch, weighted by how near
+contact each point is predicted). Both go to the same grasp program as the model-based proposals
+(planner.functional): anchors with their surface normals, the hand's start for samples as the
+starting configuration (`sample_start`), and the point targets the program pulls toward
+(`point_weights`: closeness, so far points weigh little). The samples are solved best anchor
+closure first, as the model-based ones. `fitted` is the ablation without Drake
+(`PlannerSettings.learned.solver` "fit"): the joints fitted to the targets with no collision
+constraints. `direct_proposals` and `as_drawn` are the ablation of direct diffusion
+(`PlannerSettings.proposer` "direct"): wrist and joints drawn by one model and validated as drawn.
 """
 
 from __future__ import annotations

@@ -1,8 +1,9 @@
 """Acceptance: the project's hands judge the planner's own grasps as DexGraspBench's hand files do.
 
 A few test-split pairs per hand (the benchmark, `python -m eval.agreement`, plans 50), planned
-by the model-based planner and by the learned pipeline: every candidate the planner validated is simulated under DexGraspBench's protocol with the project's
-hand and with DexGraspBench's hand file, in that file's root frame.
+by the model-based planner and by the learned pipeline: every candidate the planner validated
+is simulated under DexGraspBench's protocol with the project's hand and with DexGraspBench's
+hand file, in that file's root frame.
 """
 
 from __future__ import annotations
