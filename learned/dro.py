@@ -15,7 +15,7 @@ feature vectors well (runs without this feature stalled at 13 mm on near pairs),
 costs one cdist.
 
 Distances are predicted in centimetres inside (softplus output) and returned in metres.
-Weights are stored as safetensors with the config in the file's metadata.
+Weights are one safetensors file with the config in its header (learned.weights).
 """
 
 from __future__ import annotations
@@ -29,11 +29,14 @@ import numpy as np
 import torch
 from torch import nn
 
+from learned import weights as store
 from learned.multilateration import RigidGroups, multilaterate, rigid_fit
+from learned.weights import WeightsError
 from models.errors import DrograspError
 
 TEXT_DIM = 384  # learned.text.EMBED_DIM; fixed here so the network imports no text model
-WEIGHTS = Path(__file__).parent / "weights" / "dro.safetensors"
+WEIGHTS = store.weights_path("dro")
+FORMAT = "drograsp-dro/1"  # the header's format tag (learned.weights)
 # the ablation without anchors (DROConfig.anchors False), for eval.benchmark's no_anchors
 NO_ANCHOR_WEIGHTS = WEIGHTS.with_name("dro_no_anchors.safetensors")
 # the shipped weights: the first 17 blocks of data/grasps_v2 (its rows then), 3831 steps
@@ -41,10 +44,6 @@ RETRAIN = (
     "drograsp train dro --data data/grasps_v2 --blocks 17 --out runs/dro --epochs 8 "
     "--steps 3831 --install"
 )
-
-
-class DROWeightsError(DrograspError, RuntimeError):
-    """The D(R,O) weights file is missing, damaged or of another shape."""
 
 
 @dataclass(frozen=True)
@@ -253,46 +252,33 @@ class Checkpoint:
     meta: dict = field(default_factory=dict)
 
 
-def save_weights(net: DRONet, path: str | Path, meta: dict | None = None) -> None:
+def save_weights(net: DRONet, path: str | Path, meta: dict | None = None) -> Path:
     """The network's parameters as safetensors, with its config (and `meta`) in the header."""
-    from safetensors.torch import save_file
-
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tensors = {k: v.detach().contiguous().cpu() for k, v in net.state_dict().items()}
-    header = {"config": net.cfg.to_json(), "meta": json.dumps(meta or {})}
-    tmp = path.with_suffix(".tmp")
-    save_file(tensors, str(tmp), metadata=header)
-    tmp.replace(path)
+    config = {"format": FORMAT, "config": asdict(net.cfg), "meta": meta or {}}
+    return store.save_weights(path, net.state_dict(), config)
 
 
 def load_weights(path: str | Path | None = None) -> Checkpoint:
     """The network stored at `path` (default: the shipped weights; a bare name such as
-    "dro_no_anchors" is a file of learned/weights/). DROWeightsError naming the file and the
+    "dro_no_anchors" is a file of learned/weights/). WeightsError naming the file and the
     retraining command when it is missing, damaged or does not fit."""
-    from safetensors import SafetensorError
-    from safetensors.torch import load_file, safe_open
-
     path = Path(path) if path is not None else WEIGHTS
     if path.parent == Path(".") and not path.suffix:
-        path = WEIGHTS.with_name(f"{path.name}.safetensors")
-    if not path.is_file():
-        raise DROWeightsError(f"D(R,O) weights {path} not found; train them with `{RETRAIN}`")
+        path = store.weights_path(path.name)
+    state, header = store.load_weights(path, RETRAIN, "D(R,O) network")
     try:
-        with safe_open(str(path), framework="pt") as f:
-            header = f.metadata() or {}
-        tensors = load_file(str(path))
-        cfg = DROConfig.from_json(header["config"])
-        meta = json.loads(header.get("meta", "{}"))
+        if header.get("format") != FORMAT:
+            raise ValueError(f"format {header.get('format')!r}, not {FORMAT!r}")
+        cfg = DROConfig.from_json(json.dumps(header["config"]))
         net = DRONet(cfg)
-        net.load_state_dict(tensors)
-    except (SafetensorError, OSError, KeyError, ValueError, TypeError, RuntimeError) as err:
-        raise DROWeightsError(
-            f"D(R,O) weights {path} are damaged or of another network "
+        net.load_state_dict(state)
+    except (KeyError, ValueError, TypeError, RuntimeError) as err:
+        raise WeightsError(
+            f"D(R,O) weights {path} are of another network "
             f"({type(err).__name__}: {str(err)[:200]}); retrain with `{RETRAIN}`"
         ) from None
     net.eval()
-    return Checkpoint(net, meta)
+    return Checkpoint(net, header.get("meta", {}))
 
 
 # ---- from D to hand point targets ----------------------------------------------------------

@@ -22,6 +22,7 @@ from __future__ import annotations
 import math
 import threading
 from dataclasses import asdict, dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -32,7 +33,7 @@ from torch import nn
 from torch.nn import functional as F
 
 from learned.pointnet import Grouping, LevelConfig, PointNet2Encoder, grouping
-from learned.weights import WeightsError, load_weights, save_weights
+from learned.weights import WeightsError, load_weights, save_weights, weights_path
 from models.errors import DrograspError, ObjectError
 
 SCALE = 10.0  # network units per metre
@@ -528,23 +529,24 @@ class InteractionModel:
         config = config or InteractionConfig()
         return cls(InteractionNet(config), config)
 
-    def save(self, folder: str, name: str | None = None) -> None:
+    def save(self, folder: str, name: str | None = None) -> Path:
         name = name or self.config.name
         cfg = {
             "config": self.config.to_json(),
             "info": self.info,
             "format": "drograsp-interaction/1",
         }
-        save_weights(name, self.net.state_dict(), cfg, folder)
+        return save_weights(weights_path(name, folder), self.net.state_dict(), cfg)
 
     @classmethod
     def load(cls, folder: str | None = None, name: str = NAME) -> InteractionModel:
         retrain = DIRECT_RETRAIN if name == DIRECT_NAME else RETRAIN
-        state, cfg = load_weights(name, retrain, folder)
-        where = f"{folder or 'learned/weights'}/{name}"
+        path = weights_path(name, folder)
+        state, cfg = load_weights(path, retrain, f"{name} model")
         if cfg.get("format") != "drograsp-interaction/1" or "config" not in cfg:
             raise WeightsError(
-                f"{where}.json is not an interaction model config; remake it with `{retrain}`"
+                f"{path} does not hold an interaction model (format {cfg.get('format')!r}); "
+                f"remake it with `{retrain}`"
             )
         try:
             config = InteractionConfig.from_json(cfg["config"])
@@ -552,7 +554,7 @@ class InteractionModel:
             net.load_state_dict(state)
         except (TypeError, ValueError, RuntimeError, KeyError) as err:
             raise WeightsError(
-                f"{where}.safetensors does not fit the model's code ({type(err).__name__}: "
+                f"{path} does not fit the model's code ({type(err).__name__}: "
                 f"{str(err)[:300]}); remake it with `{retrain}`"
             ) from None
         net.eval()

@@ -5,8 +5,8 @@ regenerated once from (category, seed) and their point samples cached on disk (t
 takes ~0.5 s per object), so a step only gathers arrays. Each step augments (any yaw, tilt up to
 30 degrees, scale +-10%), rewrites the instruction from the training paraphrase bank, drops the
 text for classifier-free guidance, and takes an AdamW step; an exponential moving average of the
-weights is what ships. Checkpoints (safetensors + JSON, no pickle) are written every few minutes
-and a rerun of the same command resumes from the last one.
+weights is what ships. Checkpoints (one safetensors file, the state in its header, no pickle) are
+written every few minutes and a rerun of the same command resumes from the last one.
 """
 
 from __future__ import annotations
@@ -38,7 +38,7 @@ from learned.interaction import (
 )
 from learned.paraphrase import generic_paraphrases, request_of, train_paraphrases
 from learned.pointnet import grouping
-from learned.weights import WEIGHTS_DIR, load_weights, save_weights
+from learned.weights import WEIGHTS_DIR, load_weights, save_weights, weights_path
 from models.objects import INTENTS, instruction_text
 
 CHECKPOINT = "checkpoint"
@@ -458,13 +458,15 @@ def _save_checkpoint(out: Path, model, ema, opt, state: dict) -> None:
     for pid, st in opt_state["state"].items():
         for k, v in st.items():
             tensors[f"opt.{pid}.{k}"] = torch.as_tensor(v)
-    save_weights(CHECKPOINT, tensors, {**state, "format": "drograsp-interaction-checkpoint/1"}, out)
+    config = {**state, "format": "drograsp-interaction-checkpoint/1"}
+    save_weights(weights_path(CHECKPOINT, out), tensors, config)
 
 
 def _load_checkpoint(out: Path, model, ema, opt) -> dict | None:
-    if not (out / f"{CHECKPOINT}.safetensors").is_file():
+    path = weights_path(CHECKPOINT, out)
+    if not path.is_file():
         return None
-    tensors, state = load_weights(CHECKPOINT, "delete the checkpoint and train again", out)
+    tensors, state = load_weights(path, "delete the checkpoint and train again", "checkpoint")
     model.net.load_state_dict({k[4:]: v for k, v in tensors.items() if k.startswith("net.")})
     for k in ema:
         ema[k].copy_(tensors[f"ema.{k}"])
@@ -658,15 +660,14 @@ def train(
     final.save(str(out))
     if install:
         WEIGHTS_DIR.mkdir(parents=True, exist_ok=True)
-        for suffix in (".safetensors", ".json"):
-            shutil.copyfile(out / f"{name}{suffix}", WEIGHTS_DIR / f"{name}{suffix}")
+        shutil.copyfile(weights_path(name, out), weights_path(name))
     (out / "history.json").write_text(json.dumps(history[-2000:]), encoding="utf-8")
     return TrainResult(
         steps=step,
         minutes=final.info["minutes"],
         final_loss=final.info["final_loss"] or float("nan"),
         val_loss=final.info["val_loss"],
-        weights=out / f"{name}.safetensors",
+        weights=weights_path(name, out),
         curve=out / "loss.png",
         resumed_from=resumed,
         history=history,

@@ -1,8 +1,11 @@
-"""Weights on disk: safetensors tensors plus a JSON config beside them, never a pickle.
+"""Weights on disk: one safetensors file per model, its config in the file's header, never a
+pickle.
 
-A learned model ships as `learned/weights/<name>.safetensors` with `<name>.json` (its config and
-provenance), so a fresh `pip install .` has a working model and loading cannot run code. A
-missing or damaged file is a WeightsError naming the file and the command that remakes it.
+Every learned model (interaction, direct diffusion, D(R,O)) and the interaction model's training
+checkpoint is one `<name>.safetensors` whose header holds a JSON object under `drograsp` (the
+model's config, how it was trained, a `format` tag), so tensors and config cannot part ways, a
+fresh `pip install .` has working models, and loading cannot run code. A missing or damaged file
+is a WeightsError naming the file and the command that remakes it.
 """
 
 from __future__ import annotations
@@ -17,61 +20,56 @@ import torch
 from models.errors import DrograspError
 
 WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
+HEADER_KEY = "drograsp"  # the safetensors metadata entry holding the config (JSON)
 
 
 class WeightsError(DrograspError, RuntimeError):
     """Model weights that are missing, damaged or do not fit the model's code."""
 
 
-def weight_paths(name: str, folder: str | Path | None = None) -> tuple[Path, Path]:
-    """(tensors, config) paths of the named model in `folder` (default: the package's)."""
+def weights_path(name: str, folder: str | Path | None = None) -> Path:
+    """The named model's file in `folder` (default: the package's shipped weights)."""
     root = Path(folder) if folder is not None else WEIGHTS_DIR
-    return root / f"{name}.safetensors", root / f"{name}.json"
+    return root / f"{name}.safetensors"
 
 
-def save_weights(
-    name: str, state: dict[str, torch.Tensor], config: dict[str, Any], folder: str | Path
-) -> tuple[Path, Path]:
-    """Write tensors and config atomically (a reader never sees half a file)."""
+def save_weights(path: str | Path, state: dict[str, torch.Tensor], config: dict[str, Any]) -> Path:
+    """Write the tensors with `config` in the header, atomically (a reader never sees half a
+    file)."""
     from safetensors.torch import save_file
 
-    tensors_path, config_path = weight_paths(name, folder)
-    tensors_path.parent.mkdir(parents=True, exist_ok=True)
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
     tensors = {k: v.detach().cpu().contiguous() for k, v in state.items()}
-    tmp = tensors_path.with_suffix(".safetensors.tmp")
-    save_file(tensors, str(tmp))
-    os.replace(tmp, tensors_path)
-    tmp = config_path.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps(config, indent=2, sort_keys=True) + "\n", encoding="utf-8")
-    os.replace(tmp, config_path)
-    return tensors_path, config_path
+    tmp = path.with_name(path.name + ".tmp")
+    save_file(tensors, str(tmp), metadata={HEADER_KEY: json.dumps(config, sort_keys=True)})
+    os.replace(tmp, path)
+    return path
 
 
 def load_weights(
-    name: str, retrain: str, folder: str | Path | None = None
+    path: str | Path, retrain: str, what: str = "model"
 ) -> tuple[dict[str, torch.Tensor], dict[str, Any]]:
-    """(tensors, config) of the named model; `retrain` is the command that remakes them."""
+    """(tensors, config) stored at `path`; `retrain` is the command that remakes them and
+    `what` names the model in the error."""
     from safetensors import SafetensorError
-    from safetensors.torch import load_file
+    from safetensors.torch import load_file, safe_open
 
-    tensors_path, config_path = weight_paths(name, folder)
-    for path in (tensors_path, config_path):
-        if not path.is_file():
-            raise WeightsError(
-                f"{path}: the {name} model's weights are missing; make them with `{retrain}`"
-            )
+    path = Path(path)
+    if not path.is_file():
+        raise WeightsError(f"{path}: the {what}'s weights are missing; make them with `{retrain}`")
     try:
-        config = json.loads(config_path.read_text(encoding="utf-8"))
+        with safe_open(str(path), framework="pt") as f:
+            header = f.metadata() or {}
+        if HEADER_KEY not in header:
+            raise ValueError(f"no {HEADER_KEY!r} config in the header")
+        config = json.loads(header[HEADER_KEY])
         if not isinstance(config, dict):
-            raise ValueError("not a JSON object")
-    except (ValueError, OSError) as err:
-        raise WeightsError(
-            f"{config_path} is damaged ({type(err).__name__}: {err}); remake it with `{retrain}`"
-        ) from None
-    try:
-        state = load_file(str(tensors_path), device="cpu")
+            raise ValueError("the header's config is not a JSON object")
+        state = load_file(str(path), device="cpu")
     except (SafetensorError, OSError, ValueError, RuntimeError) as err:
         raise WeightsError(
-            f"{tensors_path} is damaged ({type(err).__name__}: {err}); remake it with `{retrain}`"
+            f"{path} is damaged ({type(err).__name__}: {str(err)[:200]}); remake it with "
+            f"`{retrain}`"
         ) from None
     return state, config

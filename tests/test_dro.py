@@ -16,7 +16,6 @@ from learned import train_dro
 from learned.dro import (
     DROConfig,
     DRONet,
-    DROWeightsError,
     input_hand_points,
     load_weights,
     place_hand,
@@ -24,6 +23,7 @@ from learned.dro import (
     save_weights,
     surface_targets,
 )
+from learned.weights import WeightsError
 from models.errors import DrograspError
 from models.hands import available_hands, load_hand
 from planner.grasp_program import GraspTargets, grasp_program
@@ -63,20 +63,26 @@ def test_weights_round_trip(tmp_path):
 
 def test_missing_or_damaged_weights_name_the_file_and_the_fix(tmp_path):
     missing = tmp_path / "none.safetensors"
-    with pytest.raises(DROWeightsError, match="none.safetensors.*drograsp train dro"):
+    with pytest.raises(WeightsError, match="none.safetensors.*drograsp train dro"):
         load_weights(missing)
     damaged = tmp_path / "bad.safetensors"
     damaged.write_bytes(b"\x08\x00\x00\x00\x00\x00\x00\x00{garbage")
-    with pytest.raises(DROWeightsError, match="bad.safetensors.*damaged"):
+    with pytest.raises(WeightsError, match="bad.safetensors.*damaged"):
         load_weights(damaged)
     other = tmp_path / "other.safetensors"
     save_weights(DRONet(TINY), other)
-    from safetensors.torch import load_file, save_file
+    from safetensors.torch import load_file, safe_open, save_file
 
+    with safe_open(str(other), framework="pt") as f:
+        header = f.metadata()
     tensors = load_file(str(other))
     tensors.pop(next(iter(tensors)))
-    save_file(tensors, str(other), metadata={"config": TINY.to_json()})
-    with pytest.raises(DROWeightsError, match="other.safetensors"):
+    save_file(tensors, str(other), metadata=header)
+    with pytest.raises(WeightsError, match="other.safetensors.*another network"):
+        load_weights(other)
+    # the interaction model's file is no D(R,O) network either
+    save_file(tensors, str(other), metadata={"drograsp": '{"format": "drograsp-interaction/1"}'})
+    with pytest.raises(WeightsError, match="other.safetensors.*format"):
         load_weights(other)
 
 

@@ -173,15 +173,23 @@ def test_missing_and_corrupt_weights(tmp_path: Path, tiny_model: InteractionMode
     tensors.write_bytes(tensors.read_bytes()[:100])
     with pytest.raises(WeightsError, match=r"interaction\.safetensors is damaged.*drograsp train"):
         InteractionModel.load(str(tmp_path))
+    # the config lives in the file's header (learned.weights): a damaged or foreign header
+    from safetensors.torch import load_file, save_file
+
     tiny_model.save(str(tmp_path))
-    (tmp_path / "interaction.json").write_text("{not json", encoding="utf-8")
-    with pytest.raises(WeightsError, match=r"interaction\.json is damaged"):
+    state = load_file(str(tensors))
+    save_file(state, str(tensors), metadata={"drograsp": "{not json"})
+    with pytest.raises(WeightsError, match=r"interaction\.safetensors is damaged"):
         InteractionModel.load(str(tmp_path))
-    tiny_model.save(str(tmp_path))
+    save_file(state, str(tensors))
+    with pytest.raises(WeightsError, match=r"interaction\.safetensors is damaged.*no 'drograsp'"):
+        InteractionModel.load(str(tmp_path))
+    save_file(state, str(tensors), metadata={"drograsp": json.dumps({"format": "other/1"})})
+    with pytest.raises(WeightsError, match="does not hold an interaction model"):
+        InteractionModel.load(str(tmp_path))
     other = InteractionModel.new(InteractionConfig(width=64, heads=2, layers=1), seed=0)
-    cfg = json.loads((tmp_path / "interaction.json").read_text())
-    cfg["config"] = other.config.to_json()
-    (tmp_path / "interaction.json").write_text(json.dumps(cfg), encoding="utf-8")
+    cfg = {"format": "drograsp-interaction/1", "config": other.config.to_json(), "info": {}}
+    save_file(state, str(tensors), metadata={"drograsp": json.dumps(cfg)})
     with pytest.raises(WeightsError, match="does not fit the model"):
         InteractionModel.load(str(tmp_path))
 
@@ -463,7 +471,7 @@ def test_intent_flag_conditions_the_model_is_dropped_with_the_text_and_round_tri
 def test_intent_flag_needs_all_rows_and_learns_from_each_rows_flag(tmp_path: Path) -> None:
     from learned.dataset import DatasetError
     from learned.train_interaction import CHECKPOINT, TrainSettings, train
-    from learned.weights import load_weights
+    from learned.weights import load_weights, weights_path
 
     data, out = tmp_path / "data", tmp_path / "run"
     _mini_dataset(data)
@@ -482,5 +490,5 @@ def test_intent_flag_needs_all_rows_and_learns_from_each_rows_flag(tmp_path: Pat
     # weights of the checkpoint: the shipped EMA weights move too little in 3 steps to see)
     assert set(load_split(data, "train").arrays["intent_ok"].tolist()) >= {0, 1}
     start = InteractionModel.new(config, settings.seed).net.met.detach()
-    live = load_weights(CHECKPOINT, "", out)[0]["net.met"]
+    live = load_weights(weights_path(CHECKPOINT, out), "")[0]["net.met"]
     assert not torch.allclose(live[0], start[0]) and not torch.allclose(live[1], start[1])
