@@ -84,17 +84,28 @@ def as_hand_file_grasp(grasp: Grasp, hand: str, xml: Path) -> Grasp:
     )
 
 
-Job = tuple[str, str, int, str, str, int, str]  # hand, category, seed, text, files, cands, proposer
+@dataclass(frozen=True)
+class PairJob:
+    """One (hand, object, instruction) to plan and judge; `hand_files` is the folder of
+    DexGraspBench's `<hand>_right_hand.xml` files."""
+
+    hand: str
+    category: str
+    seed: int
+    text: str
+    hand_files: Path
+    max_candidates: int = 8
+    proposer: str = "model"
 
 
-def judge_pair(job: Job) -> PairVerdicts:
+def judge_pair(job: PairJob) -> PairVerdicts:
     """Plan one pair and judge every validated candidate on both hands."""
-    hand, category, seed, text, hand_files, max_candidates, proposer = job
+    hand, category, seed, text, proposer = job.hand, job.category, job.seed, job.text, job.proposer
     record = PairVerdicts(hand, category, seed, text, proposer)
-    xml = Path(hand_files) / f"{hand}_right_hand.xml"
+    xml = Path(job.hand_files) / f"{hand}_right_hand.xml"
     try:
         settings = PlannerSettings(
-            proposer=proposer, schedule=ScheduleSettings(max_candidates=max_candidates)
+            proposer=proposer, schedule=ScheduleSettings(max_candidates=job.max_candidates)
         )
         planner = FunctionalPlanner(hand, settings)
         obj = make_object(category, seed)
@@ -137,11 +148,11 @@ def jobs(
     hand_files: Path,
     max_candidates: int,
     proposer: str = "model",
-) -> list[Job]:
+) -> list[PairJob]:
     from eval.planner_benchmark import pairs
 
     return [
-        (hand, cat, seed, text, str(hand_files), max_candidates, proposer)
+        PairJob(hand, cat, seed, text, Path(hand_files), max_candidates, proposer)
         for hand, cat, seed, text in pairs(split, per_category, list(hands))
     ]
 
@@ -221,7 +232,7 @@ def main() -> None:
         args.proposer,
     )
     if args.limit:
-        work = [j for h in args.hands for j in [j for j in work if j[0] == h][: args.limit]]
+        work = [j for h in args.hands for j in [j for j in work if j.hand == h][: args.limit]]
     records: list[PairVerdicts] = []
     out = args.out.open("w") if args.out else None
     with ProcessPoolExecutor(args.workers, initializer=one_thread) as pool:

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import pytest
 
-from eval.agreement import judge_pair
+from eval.agreement import PairJob, judge_pair
 from tests.conftest import reference_dir
 
 PAIRS = (("mug", "Use a mug by handle"), ("bottle", "Hold a bottle by body"))
@@ -27,7 +27,7 @@ def test_project_hand_agrees_with_dexgraspbench_hand_file(hand_name, proposer):
     verdicts = []
     for category, text in PAIRS:
         seed = seeds(category, "test", 1)[0]
-        record = judge_pair((hand_name, category, seed, text, str(hand_files), 8, proposer))
+        record = judge_pair(PairJob(hand_name, category, seed, text, hand_files, 8, proposer))
         assert not record.error, record.error
         verdicts += [(c.project, c.vendor) for c in record.candidates]
     assert verdicts, "the planner validated no candidate"
