@@ -67,7 +67,7 @@ def test_a_completed_view_covers_the_hidden_side_where_the_object_is(category):
     obj = make_object(category, 3)
     view = single_view_object(obj, seed=3)
     done = complete_view(view)
-    assert done.viewpoint is None and len(done.points) == 2 * len(view.points)
+    assert done.viewpoint is None and len(done.points) > 1.5 * len(view.points)
 
     def covered(points: np.ndarray) -> float:
         return float((cKDTree(points).query(obj.points)[0] < 0.005).mean())
@@ -77,6 +77,35 @@ def test_a_completed_view_covers_the_hidden_side_where_the_object_is(category):
     error = cKDTree(obj.points).query(done.points)[0]
     assert np.percentile(error, 90) < 0.01
     assert covered(done.points) > covered(view.points) + 0.15
+
+
+@pytest.mark.usefixtures("needs_open3d")
+def test_upright_round_objects_are_swept_about_their_axis_and_others_are_not():
+    from models.objects.completion import find_revolution
+
+    def covered(obj, points: np.ndarray) -> float:
+        return float((cKDTree(points).query(obj.points)[0] < 0.005).mean())
+
+    bottle = make_object("bottle", 3)
+    view = single_view_object(bottle, seed=3)
+    turn = find_revolution(view.points, np.asarray(view.viewpoint))
+    assert turn is not None and turn.swept.mean() > 0.9
+    # the axis: the bottle's own (the procedural objects stand on z about x = y = 0)
+    axis = bottle.points[:, :2].mean(axis=0)
+    assert np.linalg.norm(turn.centre - axis) < 0.005
+    done = complete_view(view)
+    assert covered(bottle, done.points) > 0.85
+    assert np.percentile(cKDTree(bottle.points).query(done.points)[0], 90) < 0.003
+    # a mug's handle is no surface of revolution: its points are mirrored, not swept
+    mug = make_object("mug", 3)
+    view = single_view_object(mug, seed=3, labelled=True)
+    turn = find_revolution(view.points, np.asarray(view.viewpoint))
+    handle = view.point_labels == mug.part_names.index("handle")
+    if turn is not None and handle.any():
+        assert turn.swept[handle].mean() < 0.5 < turn.swept[~handle].mean()
+    # a knife lying down has no vertical axis to sweep about
+    knife = single_view_object(make_object("knife", 3), seed=3)
+    assert find_revolution(knife.points, np.asarray(knife.viewpoint)) is None
 
 
 def test_completion_leaves_meshes_and_clouds_without_a_camera_alone():
@@ -103,7 +132,7 @@ def test_the_planner_plans_on_the_completed_view_unless_told_not_to(complete, mo
     monkeypatch.setattr(planner, "proposer_for", stop)
     with pytest.raises(RuntimeError, match="stop here"):
         planner.plan(view, "hold the bottle")
-    assert len(seen[0].points) == (2 if complete else 1) * len(view.points)
+    assert (len(seen[0].points) > len(view.points)) == complete
 
 
 @pytest.mark.usefixtures("needs_open3d")
