@@ -1,13 +1,15 @@
-"""How much of an object a single depth view shows, and how much mirror completion adds.
+"""How much of an object a single depth view shows, and how much completion adds.
 
     python -m eval.completion --split test --objects-per-category 3
 
 Per category, on its objects of the split: the camera of models.objects.views (320 x 240 rays,
-1 mm depth noise) sees the object; models.objects.completion mirrors the view. Reported:
+1 mm depth noise) sees the object; models.objects.completion completes the view. Reported:
 coverage (the share of the object's dense surface samples within 5 mm of the cloud) of the
 view and of the completed cloud; the completed cloud's error (distance of its points to the
-surface, median and 90th percentile, mm); which plane was chosen (the vertical one facing the
-camera, another vertical one, the horizontal one below, or none); the completion's time.
+surface, median and 90th percentile, mm); how many views were swept about a vertical axis (and
+which share of their points); which mirror plane the view gives (the vertical one facing the
+camera, another vertical one, the horizontal one below, or none; used for the points not
+swept); the completion's time.
 """
 
 from __future__ import annotations
@@ -24,7 +26,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from models.objects import make_object
-from models.objects.completion import complete_view, find_mirror
+from models.objects.completion import complete_view, find_mirror, find_revolution, smooth
 from models.objects.names import CATEGORY_NAMES
 from models.objects.splits import seeds
 from models.objects.views import single_view_object
@@ -42,6 +44,7 @@ class Row:
     error_median_mm: float
     error_p90_mm: float
     plane: str
+    swept: float  # share of the seen points swept about a vertical axis (0: no revolution)
     seconds: float
 
 
@@ -62,6 +65,7 @@ def measure(category: str, seed: int) -> Row:
     done = complete_view(view)
     seconds = time.perf_counter() - start
     mirror = find_mirror(view.points, view.viewpoint)
+    turn = find_revolution(smooth(view.points), np.asarray(view.viewpoint, dtype=float))
     surface = obj.points
 
     def coverage(points: np.ndarray) -> float:
@@ -78,6 +82,7 @@ def measure(category: str, seed: int) -> Row:
         float(np.median(error)),
         float(np.percentile(error, 90)),
         plane_kind(None if mirror is None else mirror.normal, look),
+        0.0 if turn is None else float(turn.swept.mean()),
         seconds,
     )
 
@@ -85,8 +90,8 @@ def measure(category: str, seed: int) -> Row:
 def table(rows: list[Row]) -> str:
     lines = [
         "| category | objects | view coverage | completed coverage | error median / p90 (mm) "
-        "| planes | s |",
-        "|---|---|---|---|---|---|---|",
+        "| swept about an axis | mirror planes | s |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     groups = [(c, [r for r in rows if r.category == c]) for c in CATEGORY_NAMES]
     groups.append(("all", rows))
@@ -94,11 +99,14 @@ def table(rows: list[Row]) -> str:
         if not group:
             continue
         planes = Counter(r.plane for r in group)
+        swept = [r.swept for r in group if r.swept > 0]
+        share = f" ({100 * np.mean(swept):.0f}% of points)" if swept else ""
         lines.append(
             f"| {name} | {len(group)} | {100 * np.mean([r.view_coverage for r in group]):.0f}% "
             f"| {100 * np.mean([r.completed_coverage for r in group]):.0f}% "
             f"| {statistics.median(r.error_median_mm for r in group):.1f} / "
             f"{statistics.median(r.error_p90_mm for r in group):.1f} "
+            f"| {len(swept)}{share} "
             f"| {', '.join(f'{k} {v}' for k, v in sorted(planes.items()))} "
             f"| {statistics.median(r.seconds for r in group):.2f} |"
         )

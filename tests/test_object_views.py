@@ -136,12 +136,16 @@ def test_the_planner_plans_on_the_completed_view_unless_told_not_to(complete, mo
 
 
 @pytest.mark.usefixtures("needs_open3d")
-def test_eval_completion_reports_what_the_mirror_added():
+def test_eval_completion_reports_what_the_completion_added():
     from eval.completion import measure, table
 
     row = measure("hammer", 5)
     assert row.completed_coverage > row.view_coverage and row.plane == "below"
-    assert "| hammer | 1 |" in table([row]) and "| all | 1 |" in table([row])
+    assert row.swept == 0.0  # a hammer lying down is no surface of revolution
+    cup = measure("cup", 1)
+    assert cup.swept > 0.9 and cup.completed_coverage > 0.85
+    assert "| hammer | 1 |" in table([row]) and "| all | 2 | " in table([row, cup])
+    assert "| 1 (" in table([cup])
 
 
 def test_a_view_without_open3d_says_which_library_is_missing(monkeypatch):
