@@ -54,6 +54,9 @@ COPIES = 16  # rotations of each seen point about the axis
 # 0.2-0.8%, a mug's body, a pan's or a teapot's 0.4-1.7%, spray bottles 3.5-5.7%)
 POINT_CONFLICT = 0.2
 MIN_SWEPT = 0.6
+# m: a seen point this near one that does not sweep is not swept either (the few points of a
+# mug's handle whose copies happen to hide behind the body would ring it with phantom handles)
+UNSWEPT_MARGIN = 0.005
 SWEEP_MAX_CONFLICT = 0.03
 THIN = 2.0  # the swept copies are thinned to one per cell of this many seen point spacings
 
@@ -185,6 +188,9 @@ def find_revolution(points: np.ndarray, eye: np.ndarray) -> Revolution | None:
     copies = revolve(points, centre)
     conflicts = image.conflicts(copies.reshape(-1, 3)).reshape(copies.shape[:2])
     swept = conflicts.mean(axis=1) <= POINT_CONFLICT
+    if (~swept).any():
+        near = cKDTree(points[~swept]).query(points, distance_upper_bound=UNSWEPT_MARGIN)[0]
+        swept &= np.isinf(near)
     if swept.mean() < MIN_SWEPT:
         return None
     conflict = float(conflicts[swept].mean())
