@@ -20,7 +20,6 @@ Weights are one safetensors file with the config in its header (learned.weights)
 
 from __future__ import annotations
 
-import json
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -31,7 +30,6 @@ from torch import nn
 
 from learned import weights as store
 from learned.multilateration import RigidGroups, multilaterate, rigid_fit
-from learned.weights import WeightsError
 from models.errors import DrograspError
 
 TEXT_DIM = 384  # learned.text.EMBED_DIM; fixed here so the network imports no text model
@@ -65,14 +63,12 @@ class DROConfig:
     # paper's ablation without anchors (uniform farthest point samples, Omega 0)
     anchors: bool = True
 
-    def to_json(self) -> str:
-        return json.dumps(asdict(self))
+    def to_json(self) -> dict:
+        return asdict(self)
 
     @classmethod
-    def from_json(cls, text: str) -> DROConfig:
-        data = json.loads(text)
-        data["edge_widths"] = tuple(data["edge_widths"])
-        return cls(**data)
+    def from_json(cls, data: dict) -> DROConfig:
+        return cls(**{**data, "edge_widths": tuple(data["edge_widths"])})
 
 
 def knn(xyz: torch.Tensor, k: int) -> torch.Tensor:
@@ -254,7 +250,7 @@ class Checkpoint:
 
 def save_weights(net: DRONet, path: str | Path, meta: dict | None = None) -> Path:
     """The network's parameters as safetensors, with its config (and `meta`) in the header."""
-    config = {"format": FORMAT, "config": asdict(net.cfg), "meta": meta or {}}
+    config = {"format": FORMAT, "config": net.cfg.to_json(), "meta": meta or {}}
     return store.save_weights(path, net.state_dict(), config)
 
 
@@ -269,11 +265,11 @@ def load_weights(path: str | Path | None = None) -> Checkpoint:
     try:
         if header.get("format") != FORMAT:
             raise ValueError(f"format {header.get('format')!r}, not {FORMAT!r}")
-        cfg = DROConfig.from_json(json.dumps(header["config"]))
+        cfg = DROConfig.from_json(header["config"])
         net = DRONet(cfg)
         net.load_state_dict(state)
     except (KeyError, ValueError, TypeError, RuntimeError) as err:
-        raise WeightsError(
+        raise store.WeightsError(
             f"D(R,O) weights {path} are of another network "
             f"({type(err).__name__}: {str(err)[:200]}); retrain with `{RETRAIN}`"
         ) from None

@@ -101,8 +101,8 @@ def test_upright_round_objects_are_swept_about_their_axis_and_others_are_not():
     view = single_view_object(mug, seed=3, labelled=True)
     turn = find_revolution(view.points, np.asarray(view.viewpoint))
     handle = view.point_labels == mug.part_names.index("handle")
-    if turn is not None and handle.any():
-        assert turn.swept[handle].mean() < 0.5 < turn.swept[~handle].mean()
+    assert turn is not None and handle.any()
+    assert turn.swept[handle].mean() < 0.5 < turn.swept[~handle].mean()
     # a knife lying down has no vertical axis to sweep about
     knife = single_view_object(make_object("knife", 3), seed=3)
     assert find_revolution(knife.points, np.asarray(knife.viewpoint)) is None

@@ -54,10 +54,10 @@ COPIES = 16  # rotations of each seen point about the axis
 # 0.2-0.8%, a mug's body, a pan's or a teapot's 0.4-1.7%, spray bottles 3.5-5.7%)
 POINT_CONFLICT = 0.2
 MIN_SWEPT = 0.6
+SWEEP_MAX_CONFLICT = 0.03
 # m: a seen point this near one that does not sweep is not swept either (the few points of a
 # mug's handle whose copies happen to hide behind the body would ring it with phantom handles)
 UNSWEPT_MARGIN = 0.005
-SWEEP_MAX_CONFLICT = 0.03
 THIN = 2.0  # the swept copies are thinned to one per cell of this many seen point spacings
 
 
