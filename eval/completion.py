@@ -6,10 +6,10 @@ Per category, on its objects of the split: the camera of models.objects.views (3
 1 mm depth noise) sees the object; models.objects.completion completes the view. Reported:
 coverage (the share of the object's dense surface samples within 5 mm of the cloud) of the
 view and of the completed cloud; the completed cloud's error (distance of its points to the
-surface, median and 90th percentile, mm); how many views were swept about a vertical axis (and
-which share of their points); which mirror plane the view gives (the vertical one facing the
-camera, another vertical one, the horizontal one below, or none; used for the points not
-swept); the completion's time.
+surface, median, 90th and 99th percentile, mm); how many views were swept about a vertical axis (and
+which share of their points); which mirror plane the points not swept are reflected through (the
+vertical one through the axis along them, "axial"; else the view's own: the vertical one facing
+the camera, another vertical one, the horizontal one below, or none); the completion's time.
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from models.objects import make_object
-from models.objects.completion import complete_view, find_mirror, find_revolution, smooth
+from models.objects.completion import complete_view, find_completion, smooth
 from models.objects.names import CATEGORY_NAMES
 from models.objects.splits import seeds
 from models.objects.views import single_view_object
@@ -43,6 +43,7 @@ class Row:
     completed_coverage: float
     error_median_mm: float
     error_p90_mm: float
+    error_p99_mm: float  # phantom surfaces (a part mirrored to where it is not) show here
     plane: str
     swept: float  # share of the seen points swept about a vertical axis (0: no revolution)
     seconds: float
@@ -64,8 +65,8 @@ def measure(category: str, seed: int) -> Row:
     start = time.perf_counter()
     done = complete_view(view)
     seconds = time.perf_counter() - start
-    mirror = find_mirror(view.points, view.viewpoint)
-    turn = find_revolution(smooth(view.points), np.asarray(view.viewpoint, dtype=float))
+    plan = find_completion(smooth(view.points), np.asarray(view.viewpoint, dtype=float))
+    turn, mirror = plan.revolution, plan.mirror
     surface = obj.points
 
     def coverage(points: np.ndarray) -> float:
@@ -81,7 +82,8 @@ def measure(category: str, seed: int) -> Row:
         coverage(done.points),
         float(np.median(error)),
         float(np.percentile(error, 90)),
-        plane_kind(None if mirror is None else mirror.normal, look),
+        float(np.percentile(error, 99)),
+        "axial" if plan.axial else plane_kind(None if mirror is None else mirror.normal, look),
         0.0 if turn is None else float(turn.swept.mean()),
         seconds,
     )
@@ -89,7 +91,7 @@ def measure(category: str, seed: int) -> Row:
 
 def table(rows: list[Row]) -> str:
     lines = [
-        "| category | objects | view coverage | completed coverage | error median / p90 (mm) "
+        "| category | objects | view coverage | completed coverage | error median / p90 / p99 (mm) "
         "| swept about an axis | mirror planes | s |",
         "|---|---|---|---|---|---|---|---|",
     ]
@@ -105,7 +107,8 @@ def table(rows: list[Row]) -> str:
             f"| {name} | {len(group)} | {100 * np.mean([r.view_coverage for r in group]):.0f}% "
             f"| {100 * np.mean([r.completed_coverage for r in group]):.0f}% "
             f"| {statistics.median(r.error_median_mm for r in group):.1f} / "
-            f"{statistics.median(r.error_p90_mm for r in group):.1f} "
+            f"{statistics.median(r.error_p90_mm for r in group):.1f} / "
+            f"{statistics.median(r.error_p99_mm for r in group):.1f} "
             f"| {len(swept)}{share} "
             f"| {', '.join(f'{k} {v}' for k, v in sorted(planes.items()))} "
             f"| {statistics.median(r.seconds for r in group):.2f} |"

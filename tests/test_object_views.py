@@ -108,6 +108,23 @@ def test_upright_round_objects_are_swept_about_their_axis_and_others_are_not():
     assert find_revolution(knife.points, np.asarray(knife.viewpoint)) is None
 
 
+@pytest.mark.usefixtures("needs_open3d")
+def test_a_mugs_handle_is_mirrored_through_the_plane_through_its_axis():
+    from models.objects.completion import find_completion, smooth
+
+    mug = make_object("mug", 19)
+    view = single_view_object(mug, seed=19, labelled=True)
+    plan = find_completion(smooth(view.points), np.asarray(view.viewpoint))
+    assert plan.axial and plan.revolution is not None
+    # the handle stands out along x from the body's axis: the plane through both is y = 0
+    assert abs(plan.mirror.normal[1]) > 0.99
+    done = complete_view(view)
+    handle = mug.points[mug.point_labels == mug.part_names.index("handle")]
+    assert (cKDTree(done.points).query(handle)[0] < 0.005).mean() > 0.9
+    # no phantom handle: the view's own plane (facing the camera) put a copy 15-35 mm away
+    assert np.percentile(cKDTree(mug.points).query(done.points)[0], 99) < 0.005
+
+
 def test_completion_leaves_meshes_and_clouds_without_a_camera_alone():
     mug = make_object("mug", 3)
     assert complete_view(mug) is mug
