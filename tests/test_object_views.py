@@ -96,6 +96,11 @@ def test_upright_round_objects_are_swept_about_their_axis_and_others_are_not():
     done = complete_view(view)
     assert covered(bottle, done.points) > 0.85
     assert np.percentile(cKDTree(bottle.points).query(done.points)[0], 90) < 0.003
+    # its underside, which the camera above never sees, is closed by a disc at its lowest point
+    underside = bottle.points[bottle.points[:, 2] < bottle.points[:, 2].min() + 0.001]
+    assert len(underside) > 20
+    assert (cKDTree(done.points).query(underside)[0] < 0.005).mean() > 0.95
+    assert (cKDTree(view.points).query(underside)[0] < 0.005).mean() < 0.5
     # a mug's handle is no surface of revolution: its points are mirrored, not swept
     mug = make_object("mug", 3)
     view = single_view_object(mug, seed=3, labelled=True)

@@ -19,8 +19,11 @@ back comes out up to 8 mm too near), and a plane fills only the half it mirrors.
 Objects that stand on their axis (bottles, cups, bowls, glasses, a mug's body) are completed by
 revolution first: a vertical axis fitted to circles through horizontal slices of the view, each
 seen point swept around it, the copies the image contradicts dropped. Seen points whose copies
-the image contradicts too often (a mug's handle) are not swept; they are mirrored as above. A
-view whose sweep the image contradicts overall (a knife lying down) is only mirrored.
+the image contradicts too often (a mug's handle) are not swept; they are mirrored through the
+vertical plane through the axis along them (a handle's own plane), or as above where the image
+contradicts that plane. A swept object's underside, which a camera above never sees, is closed
+by a disc. A view whose sweep the image contradicts overall (a knife lying down) is only
+mirrored.
 """
 
 from __future__ import annotations
@@ -62,6 +65,9 @@ UNSWEPT_MARGIN = 0.005
 # points' principal direction, in these steps (degrees)
 AXIAL_SPAN_DEG = 10.0
 AXIAL_STEP_DEG = 0.5
+# the underside of a swept object (never in view from above) is closed by a disc at its lowest
+# point, as wide as the points within BASE_LAYER of it reach (90th percentile)
+BASE_LAYER = 0.004
 THIN = 2.0  # the swept copies are thinned to one per cell of this many seen point spacings
 
 
@@ -217,6 +223,24 @@ def _thin(points: np.ndarray, spacing: float, seen: cKDTree) -> np.ndarray:
     return first[np.isinf(gap)]
 
 
+def base(points: np.ndarray, centre: np.ndarray, spacing: float) -> np.ndarray:
+    """Points of the disc closing a swept object's underside: a grid of `spacing` at the lowest
+    height of `points` (the completed cloud), about the axis at `centre` (x, y), out to a
+    spacing inside the rim the lowest layer reaches, less the grid points already near the
+    cloud. Bottles, cups and mugs stand on a flat base; without it the fingers may be planned
+    under a rim into the hollow a base would fill."""
+    low = float(points[:, 2].min())
+    layer = points[points[:, 2] < low + BASE_LAYER, :2] - centre
+    radius = float(np.percentile(np.linalg.norm(layer, axis=1), 90)) - spacing
+    if radius <= spacing:
+        return np.empty((0, 3))
+    ticks = np.arange(-radius, radius + 1e-12, spacing)
+    grid = np.stack(np.meshgrid(ticks, ticks), axis=-1).reshape(-1, 2)
+    grid = grid[np.linalg.norm(grid, axis=1) <= radius] + centre
+    disc = np.column_stack([grid, np.full(len(grid), low)])
+    return disc[cKDTree(points).query(disc)[0] > spacing]
+
+
 def reflect(points: np.ndarray, normal: np.ndarray, offset: float) -> np.ndarray:
     return points + 2.0 * (offset - points @ normal)[:, None] * normal
 
@@ -326,10 +350,10 @@ def find_completion(points: np.ndarray, eye: np.ndarray) -> Completion:
 
 def complete_view(obj: ObjectModel) -> ObjectModel:
     """A single-view cloud (an ObjectModel with a `viewpoint`) smoothed (`smooth`) and with its
-    hidden side added (`find_completion`): the points the sweep takes turned about its axis,
-    the others reflected through the mirror plane (points, normals and part labels alike), the
-    copies and reflections the depth image contradicts dropped; only smoothed when nothing
-    explains the view. Anything else (a mesh, a cloud without a viewpoint) comes back
+    hidden side added (`find_completion`): the points the sweep takes turned about its axis and
+    a swept object's underside closed (`base`), the others reflected through the mirror plane
+    (points, normals and part labels alike), the copies and reflections the depth image
+    contradicts dropped; only smoothed when nothing explains the view. Anything else (a mesh, a cloud without a viewpoint) comes back
     unchanged."""
     from .loading import load_object
 
@@ -366,6 +390,12 @@ def complete_view(obj: ObjectModel) -> ObjectModel:
         points = np.vstack([points, *add_p])
         normals = np.vstack([normals, *add_n])
         labels = None if labels is None else np.concatenate([labels, labels[src]])
+    if turn is not None:
+        disc = base(points, turn.centre, spacing)
+        if labels is not None:  # the base takes the label of its rim
+            labels = np.concatenate([labels, labels[cKDTree(points).query(disc)[1]]])
+        points = np.vstack([points, disc])
+        normals = np.vstack([normals, np.tile([0.0, 0.0, -1.0], (len(disc), 1))])
     return load_object(
         points,
         name=f"{obj.name}_completed",
