@@ -352,8 +352,8 @@ def complete_view(obj: ObjectModel) -> ObjectModel:
     """A single-view cloud (an ObjectModel with a `viewpoint`) smoothed (`smooth`) and with its
     hidden side added (`find_completion`): the points the sweep takes turned about its axis and
     a swept object's underside closed (`base`), the others reflected through the mirror plane
-    (points, normals and part labels alike), the copies and reflections the depth image
-    contradicts dropped; only smoothed when nothing explains the view. Anything else (a mesh, a cloud without a viewpoint) comes back
+    (points, normals and part labels alike), the copies the depth image contradicts dropped;
+    only smoothed when nothing explains the view. Anything else (a mesh, a cloud without a viewpoint) comes back
     unchanged."""
     from .loading import load_object
 
@@ -380,11 +380,9 @@ def complete_view(obj: ObjectModel) -> ObjectModel:
     if plan.mirror is not None:
         n = plan.mirror.normal
         src = np.flatnonzero(mirrored)
-        reflected = reflect(points[src], n, plan.mirror.offset)
-        keep = ~_DepthImage(points, eye).conflicts(reflected)
-        add_p.append(reflected[keep])
-        add_n.append((normals[src] - 2.0 * (normals[src] @ n)[:, None] * n)[keep])
-        add_src.append(src[keep])
+        add_p.append(reflect(points[src], n, plan.mirror.offset))
+        add_n.append(normals[src] - 2.0 * (normals[src] @ n)[:, None] * n)
+        add_src.append(src)
     if add_p:
         src = np.concatenate(add_src)
         points = np.vstack([points, *add_p])
