@@ -187,14 +187,16 @@ def revolve(points: np.ndarray, centre: np.ndarray) -> np.ndarray:
     return np.concatenate([turned, z], axis=2)
 
 
-def find_revolution(points: np.ndarray, eye: np.ndarray) -> Revolution | None:
+def find_revolution(
+    points: np.ndarray, eye: np.ndarray, image: _DepthImage | None = None
+) -> Revolution | None:
     """The sweep of the view about its fitted vertical axis, or None when no axis fits, fewer
     than MIN_SWEPT of the points sweep, or the image contradicts more than SWEEP_MAX_CONFLICT
-    of the swept points' copies."""
+    of the swept points' copies. `image`: the view's depth image where already made."""
     centre = find_axis(points)
     if centre is None:
         return None
-    image = _DepthImage(points, eye)
+    image = image or _DepthImage(points, eye)
     copies = revolve(points, centre)
     conflicts = image.conflicts(copies.reshape(-1, 3)).reshape(copies.shape[:2])
     swept = conflicts.mean(axis=1) <= POINT_CONFLICT
@@ -245,11 +247,13 @@ def reflect(points: np.ndarray, normal: np.ndarray, offset: float) -> np.ndarray
     return points + 2.0 * (offset - points @ normal)[:, None] * normal
 
 
-def find_mirror(points: np.ndarray, eye: np.ndarray) -> Mirror | None:
+def find_mirror(
+    points: np.ndarray, eye: np.ndarray, image: _DepthImage | None = None
+) -> Mirror | None:
     """The best-scoring plane (few contradictions, much added surface) for the view of
     `points` from `eye`, or None when its reflection contradicts the image at more than
-    MAX_CONFLICT of the points."""
-    image = _DepthImage(points, eye)
+    MAX_CONFLICT of the points. `image`: the view's depth image where already made."""
+    image = image or _DepthImage(points, eye)
     probe = points[:: max(1, len(points) // 1500)]
     view = image.axis.copy()
     view[2] = 0.0
@@ -337,15 +341,16 @@ def axial_mirror(points: np.ndarray, centre: np.ndarray, image: _DepthImage) -> 
 def find_completion(points: np.ndarray, eye: np.ndarray) -> Completion:
     """The sweep (`find_revolution`) and, for what it leaves, the plane through its axis
     (`axial_mirror`), else the view's own plane (`find_mirror`)."""
-    turn = find_revolution(points, eye)
+    image = _DepthImage(points, eye)
+    turn = find_revolution(points, eye, image)
     rest = np.ones(len(points), dtype=bool) if turn is None else ~turn.swept
     if not rest.any():
         return Completion(turn, None)
     if turn is not None:
-        axial = axial_mirror(points[rest], turn.centre, _DepthImage(points, eye))
+        axial = axial_mirror(points[rest], turn.centre, image)
         if axial is not None:
             return Completion(turn, axial, axial=True)
-    return Completion(turn, find_mirror(points, eye))
+    return Completion(turn, find_mirror(points, eye, image))
 
 
 def complete_view(obj: ObjectModel) -> ObjectModel:
