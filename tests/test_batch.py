@@ -161,6 +161,7 @@ def test_killed_run_restarts_without_loss_or_duplicates(tmp_path):
     assert summary["errors"] == 1
 
 
+@pytest.mark.slow  # starting a local Ray cluster takes most of a minute here
 def test_local_ray_gives_the_pool_results(tmp_path):
     import ray
 

@@ -279,6 +279,7 @@ def test_a_page_holds_only_its_own_grasp(tmp_path):
     assert len(again) == len(first)
 
 
+@pytest.mark.slow  # the whole demo for one hand, both proposers: most of a minute here
 def test_demo_lists_every_hand(tmp_path):
     run = _cli("demo", "--out", str(tmp_path), "--hands", "allegro")
     assert "allegro" in run.stdout and "Use a mug by handle" in run.stdout
