@@ -29,6 +29,7 @@ from scipy.spatial.transform import Rotation
 
 from learned.dataset import DatasetError, GraspArrays, load_split
 from learned.interaction import (
+    Frame,
     InteractionConfig,
     InteractionModel,
     canonical_frame,
@@ -85,6 +86,11 @@ class TrainSettings:
     # still teach where the parts are, less often than the grasps that meet the intent teach
     # what the intent asks
     unmet_weight: float = 1.0
+    # share of the grasps learned with the object's canonical frame turned half round about z:
+    # the frame's sign comes from the cloud's third moment, which a completed single view can
+    # flip (a knife read from blade to handle, docs/learned_log.md); with turned frames in
+    # training, which end is which has to be read from the shape. 0 keeps the convention.
+    turn_share: float = 0.0
     samples_per_object: int = 4  # cached 2048-point samples per object
     # the first blocks of each dataset folder only: the dataset as an earlier run saw it (the
     # shipped direct-diffusion weights were trained on the first 17 of data/grasps_v2)
@@ -273,6 +279,11 @@ def augment(
     return s * points @ rot.T, w, s * anchors @ rot.T
 
 
+def half_turned(frame: Frame) -> Frame:
+    """The frame turned half round about z (canonical x and y change sign)."""
+    return Frame(frame.centre, np.diag([-1.0, -1.0, 1.0]) @ frame.rot)
+
+
 class Batcher:
     """Makes training batches: augmented canonical clouds with their groupings, x, texts."""
 
@@ -385,6 +396,8 @@ class Batcher:
             if self.settings.augment:
                 pts, w, anc = augment(pts, w, anc, rng)
             frame = canonical_frame(pts)
+            if self.settings.turn_share > 0 and rng.random() < self.settings.turn_share:
+                frame = half_turned(frame)
             xyz.append(frame.to_canonical(pts) * 10.0)
             xs.append(self.x(i, w, anc, frame))
             g = self.cache.groups(cat, seed, self.config)[k]
@@ -436,7 +449,10 @@ def x_statistics(batcher: Batcher, rng: np.random.Generator, n: int = 4096) -> t
         pts, w, a = augment(
             item["points"][0].astype(np.float64), batcher.wrist[i], batcher.anchors[i], rng
         )
-        xs.append(batcher.x(i, w, a, canonical_frame(pts)))
+        frame = canonical_frame(pts)
+        if batcher.settings.turn_share > 0 and rng.random() < batcher.settings.turn_share:
+            frame = half_turned(frame)
+        xs.append(batcher.x(i, w, a, frame))
     x = np.stack(xs)
     mean = x.mean(0)
     mean[3:9] = 0.0
@@ -684,7 +700,13 @@ def _val_batch(data, cache, config, settings) -> Batcher | None:
         return None
     rows = rows[np.random.default_rng(0).permutation(len(rows))[:256]]
     quiet = TrainSettings(
-        **{**asdict(settings), "augment": False, "canonical_share": 1.0, "generic_share": 0.0}
+        **{
+            **asdict(settings),
+            "augment": False,
+            "canonical_share": 1.0,
+            "generic_share": 0.0,
+            "turn_share": 0.0,
+        }
     )
     return Batcher(val, rows, cache, config, quiet)
 

@@ -227,6 +227,29 @@ def test_training_checkpoint_resume(tmp_path: Path) -> None:
     shutil.rmtree(out / "object_points")
 
 
+@pytest.mark.skipif(not DATA.is_dir(), reason="data/grasps_v2 absent")
+@pytest.mark.parametrize("share", [0.0, 1.0])
+def test_turn_share_learns_objects_with_their_frame_turned_half_round(
+    tmp_path: Path, share: float
+) -> None:
+    import random
+
+    from learned.train_interaction import Batcher, ObjectPoints, TrainSettings, training_pairs
+
+    data = load_split(DATA, "train")
+    rows, texts = training_pairs(data, False, False)
+    rows, texts = rows[:6], texts[:6]
+    settings = TrainSettings(turn_share=share, samples_per_object=1, progress=False)
+    batcher = Batcher(
+        data, rows, ObjectPoints(tmp_path, TINY.points, 1), TINY, settings, list(texts)
+    )
+    batch = batcher.make(np.arange(6), np.random.default_rng(0), random.Random(0))
+    # the canonical frame puts the heavier tail (the larger third moment) toward +x; turned
+    # half round, toward -x
+    third = (batch["xyz"][:, :, 0].double() ** 3).sum(1)
+    assert ((third < 0) if share else (third > 0)).all(), third
+
+
 # ---- bad input ---------------------------------------------------------------------------------
 def test_bad_inputs(mug: np.ndarray, tiny_model: InteractionModel) -> None:
     with pytest.raises(ObjectError, match="empty"):
@@ -262,7 +285,9 @@ def test_cli_generic_share_reaches_the_settings_and_is_checked(capsys) -> None:
 
     argv = ["train", "interaction", "--data", "D", "--out", "O", "--generic-share", "0.5"]
     _, settings = interaction_setup(build_parser(argv).parse_args(argv))
-    assert settings.generic_share == 0.5
+    assert settings.generic_share == 0.5 and settings.turn_share == 0.0
+    turned = argv + ["--turn-share", "0.5"]
+    assert interaction_setup(build_parser(turned).parse_args(turned))[1].turn_share == 0.5
     bad = argv[:-1] + ["1.5"]
     with pytest.raises(SystemExit) as exc:
         build_parser(bad).parse_args(bad)

@@ -73,6 +73,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         "handle' (default 0.2; 0 turns it off)",
     )
     i.add_argument(
+        "--turn-share",
+        type=share,
+        default=0.0,
+        help="share of grasps learned with the object's frame turned half round, so the model "
+        "reads which end is which from the shape, not the frame's sign (default 0)",
+    )
+    i.add_argument(
         "--all-rows",
         action="store_true",
         help="learn also from grasps that miss their intent's definition (intent_ok 0)",
@@ -191,6 +198,7 @@ def interaction_setup(args: argparse.Namespace):
         checkpoint_minutes=args.checkpoint_minutes,
         balance=args.balance,
         generic_share=args.generic_share,
+        turn_share=args.turn_share,
         all_rows=args.all_rows,
         relabel=args.relabel,
         anchors_on_part=args.anchors_on_part,
