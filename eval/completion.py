@@ -6,10 +6,11 @@ Per category, on its objects of the split: the camera of models.objects.views (3
 1 mm depth noise) sees the object; models.objects.completion completes the view. Reported:
 coverage (the share of the object's dense surface samples within 5 mm of the cloud) of the
 view and of the completed cloud; the completed cloud's error (distance of its points to the
-surface, median, 90th and 99th percentile, mm); how many views were swept about a vertical axis (and
-which share of their points); which mirror plane the points not swept are reflected through (the
-vertical one through the axis along them, "axial"; else the view's own: the vertical one facing
-the camera, another vertical one, the horizontal one below, or none); the completion's time.
+surface, median, 90th and 99th percentile, mm); how many views were swept about a vertical axis
+(and which share of their points); which mirror plane the points not swept are reflected
+through (the vertical one through the axis along them, "axial"; else the view's own: the
+vertical one facing the camera, another vertical one, the horizontal one below, or none); the
+completion's time.
 """
 
 from __future__ import annotations

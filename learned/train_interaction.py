@@ -279,9 +279,13 @@ def augment(
     return s * points @ rot.T, w, s * anchors @ rot.T
 
 
-def half_turned(frame: Frame) -> Frame:
-    """The frame turned half round about z (canonical x and y change sign)."""
-    return Frame(frame.centre, np.diag([-1.0, -1.0, 1.0]) @ frame.rot)
+def training_frame(pts: np.ndarray, turn_share: float, rng: np.random.Generator) -> Frame:
+    """The cloud's canonical frame, turned half round about z (canonical x and y change sign)
+    for a `turn_share` of the calls; no random draw at 0, so runs without it are unchanged."""
+    frame = canonical_frame(pts)
+    if turn_share > 0 and rng.random() < turn_share:
+        return Frame(frame.centre, np.diag([-1.0, -1.0, 1.0]) @ frame.rot)
+    return frame
 
 
 class Batcher:
@@ -395,9 +399,7 @@ class Batcher:
             w, anc = self.wrist[i], self.anchors[i]
             if self.settings.augment:
                 pts, w, anc = augment(pts, w, anc, rng)
-            frame = canonical_frame(pts)
-            if self.settings.turn_share > 0 and rng.random() < self.settings.turn_share:
-                frame = half_turned(frame)
+            frame = training_frame(pts, self.settings.turn_share, rng)
             xyz.append(frame.to_canonical(pts) * 10.0)
             xs.append(self.x(i, w, anc, frame))
             g = self.cache.groups(cat, seed, self.config)[k]
@@ -449,10 +451,7 @@ def x_statistics(batcher: Batcher, rng: np.random.Generator, n: int = 4096) -> t
         pts, w, a = augment(
             item["points"][0].astype(np.float64), batcher.wrist[i], batcher.anchors[i], rng
         )
-        frame = canonical_frame(pts)
-        if batcher.settings.turn_share > 0 and rng.random() < batcher.settings.turn_share:
-            frame = half_turned(frame)
-        xs.append(batcher.x(i, w, a, frame))
+        xs.append(batcher.x(i, w, a, training_frame(pts, batcher.settings.turn_share, rng)))
     x = np.stack(xs)
     mean = x.mean(0)
     mean[3:9] = 0.0

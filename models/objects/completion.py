@@ -28,6 +28,7 @@ mirrored.
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -196,7 +197,8 @@ def find_revolution(
     centre = find_axis(points)
     if centre is None:
         return None
-    image = image or _DepthImage(points, eye)
+    if image is None:
+        image = _DepthImage(points, eye)
     copies = revolve(points, centre)
     conflicts = image.conflicts(copies.reshape(-1, 3)).reshape(copies.shape[:2])
     swept = conflicts.mean(axis=1) <= POINT_CONFLICT
@@ -247,42 +249,63 @@ def reflect(points: np.ndarray, normal: np.ndarray, offset: float) -> np.ndarray
     return points + 2.0 * (offset - points @ normal)[:, None] * normal
 
 
+def _probe(points: np.ndarray) -> np.ndarray:
+    """At most about 1500 of the points, evenly by index: enough to score a plane."""
+    return points[:: max(1, len(points) // 1500)]
+
+
+def _best_plane(
+    probe: np.ndarray, planes: Iterable[tuple[np.ndarray, float]], image: _DepthImage
+) -> Mirror | None:
+    """Of the planes (normal, offset), the one whose reflection of `probe` scores best (its
+    share of contradicted points less NOVELTY_WEIGHT times its share adding surface, farther
+    than two point spacings from the probe), or None when that one's contradicted share
+    exceeds MAX_CONFLICT. Earlier planes win ties."""
+    tree = cKDTree(probe)
+    apart = 2.0 * float(np.median(tree.query(probe, k=2)[0][:, 1]))
+    best, best_score = None, np.inf
+    for normal, offset in planes:
+        mirrored = reflect(probe, normal, offset)
+        conflict = float(image.conflicts(mirrored).mean())
+        novel = float((tree.query(mirrored)[0] > apart).mean())
+        score = conflict - NOVELTY_WEIGHT * novel
+        if score < best_score - 1e-9:
+            best, best_score = Mirror(normal, float(offset), conflict), score
+    if best is None or best.conflict > MAX_CONFLICT:
+        return None
+    return best
+
+
 def find_mirror(
     points: np.ndarray, eye: np.ndarray, image: _DepthImage | None = None
 ) -> Mirror | None:
     """The best-scoring plane (few contradictions, much added surface) for the view of
     `points` from `eye`, or None when its reflection contradicts the image at more than
     MAX_CONFLICT of the points. `image`: the view's depth image where already made."""
-    image = image or _DepthImage(points, eye)
-    probe = points[:: max(1, len(points) // 1500)]
+    if image is None:
+        image = _DepthImage(points, eye)
+    probe = _probe(points)
     view = image.axis.copy()
     view[2] = 0.0
     normals = []
     if np.linalg.norm(view) > 0.2:  # not looking straight down: vertical planes
         view /= np.linalg.norm(view)
-        for yaw in np.radians(YAWS_DEG):
+        for yaw in np.radians(YAWS_DEG):  # facing the camera first, so it wins ties
             c, s = np.cos(yaw), np.sin(yaw)
             normals.append(np.array([c * view[0] - s * view[1], s * view[0] + c * view[1], 0.0]))
     normals.append(np.array([0.0, 0.0, -1.0]))  # the unseen underside
-    tree = cKDTree(probe)
-    apart = 2.0 * float(np.median(tree.query(probe, k=2)[0][:, 1]))
-    best, best_score = None, np.inf
-    for normal in normals:
-        depth = probe @ normal
-        front = float(np.percentile(depth, 2))
-        # a symmetric object's plane lies about as deep as the seen part reaches (a cylinder's
-        # seen sides sit at its axis): offsets up to 1.5 times that depth
-        span = max(float(np.percentile(depth, 98)) - front, 1e-3)
-        for offset in front + np.linspace(0.05, 1.5, OFFSETS) * span:
-            mirrored = reflect(probe, normal, offset)
-            conflict = float(image.conflicts(mirrored).mean())
-            novel = float((tree.query(mirrored)[0] > apart).mean())
-            score = conflict - NOVELTY_WEIGHT * novel
-            if score < best_score - 1e-9:  # earlier planes (facing the camera) win ties
-                best, best_score = Mirror(normal, float(offset), conflict), score
-    if best is None or best.conflict > MAX_CONFLICT:
-        return None
-    return best
+
+    def planes() -> Iterator[tuple[np.ndarray, float]]:
+        for normal in normals:
+            depth = probe @ normal
+            front = float(np.percentile(depth, 2))
+            # a symmetric object's plane lies about as deep as the seen part reaches (a
+            # cylinder's seen sides sit at its axis): offsets up to 1.5 times that depth
+            span = max(float(np.percentile(depth, 98)) - front, 1e-3)
+            for offset in front + np.linspace(0.05, 1.5, OFFSETS) * span:
+                yield normal, float(offset)
+
+    return _best_plane(probe, planes(), image)
 
 
 def smooth(points: np.ndarray, k: int = SMOOTH_NEIGHBOURS) -> np.ndarray:
@@ -319,23 +342,15 @@ def axial_mirror(points: np.ndarray, centre: np.ndarray, image: _DepthImage) -> 
     mirror images 15-20 mm (median) away, behind the body. The planes within AXIAL_SPAN_DEG of
     the points' principal direction are scored as `find_mirror` scores its planes: a handle
     seen edge on is contradicted by a plane 3 degrees off its own."""
-    points = points[:: max(1, len(points) // 1500)]
-    rel = points[:, :2] - centre
+    probe = _probe(points)
+    rel = probe[:, :2] - centre
     _, vectors = np.linalg.eigh(rel.T @ rel)
     principal = np.arctan2(vectors[1, 1], vectors[0, 1])
-    tree = cKDTree(points)
-    apart = 2.0 * float(np.median(tree.query(points, k=2)[0][:, 1]))
-    best, best_score = None, np.inf
+    planes = []
     for delta in np.radians(np.arange(-AXIAL_SPAN_DEG, AXIAL_SPAN_DEG + 1e-9, AXIAL_STEP_DEG)):
-        angle = principal + delta
-        normal = np.array([-np.sin(angle), np.cos(angle), 0.0])
-        offset = float(centre @ normal[:2])
-        mirrored = reflect(points, normal, offset)
-        conflict = float(image.conflicts(mirrored).mean())
-        score = conflict - NOVELTY_WEIGHT * float((tree.query(mirrored)[0] > apart).mean())
-        if score < best_score:
-            best, best_score = Mirror(normal, offset, conflict), score
-    return best if best is not None and best.conflict <= MAX_CONFLICT else None
+        normal = np.array([-np.sin(principal + delta), np.cos(principal + delta), 0.0])
+        planes.append((normal, float(centre @ normal[:2])))
+    return _best_plane(probe, planes, image)
 
 
 def find_completion(points: np.ndarray, eye: np.ndarray) -> Completion:
@@ -358,8 +373,8 @@ def complete_view(obj: ObjectModel) -> ObjectModel:
     hidden side added (`find_completion`): the points the sweep takes turned about its axis and
     a swept object's underside closed (`base`), the others reflected through the mirror plane
     (points, normals and part labels alike), the copies the depth image contradicts dropped;
-    only smoothed when nothing explains the view. Anything else (a mesh, a cloud without a viewpoint) comes back
-    unchanged."""
+    only smoothed when nothing explains the view. Anything else (a mesh, a cloud without a
+    viewpoint) comes back unchanged."""
     from .loading import load_object
 
     if obj.mesh is not None or obj.viewpoint is None:
