@@ -48,6 +48,7 @@ DIRECT_RETRAIN = (
     "runs/direct --steps 7065 --minutes 120 --install"
 )
 TARGETS = ("anchors", "joints")
+FRAME_SIGNS = ("profile", "moment")
 
 
 @dataclass
@@ -89,10 +90,17 @@ class InteractionConfig:
     # sampling asks for flag 1, so grasps that miss their intent still teach where the parts
     # are without being drawn as what the intent asks (configs without it: off)
     intent_flag: bool = False
+    # how the canonical frame tells one end of the object from the other (`canonical_frame`):
+    # "profile" (where the cross-sections are large) reads a completed single view as it reads
+    # the whole object; "moment" (the points' third moment, configs without the option) flips
+    # for completed knives and spray bottles, whose seen sides are sampled densely
+    frame_sign: str = "profile"
 
     def __post_init__(self) -> None:
         if self.target not in TARGETS:
             raise ValueError(f"unknown target {self.target!r}; one of {TARGETS}")
+        if self.frame_sign not in FRAME_SIGNS:
+            raise ValueError(f"unknown frame_sign {self.frame_sign!r}; one of {FRAME_SIGNS}")
 
     @property
     def x_dim(self) -> int:
@@ -117,6 +125,7 @@ class InteractionConfig:
         known = {f for f in cls.__dataclass_fields__}
         kw = {k: v for k, v in data.items() if k in known}
         kw.setdefault("film", False)  # written before the option existed
+        kw.setdefault("frame_sign", "moment")  # likewise
         for key in ("object_levels", "hand_levels"):
             if key in kw:
                 kw[key] = tuple((int(c), int(k), tuple(int(w) for w in ws)) for c, k, ws in kw[key])
@@ -140,16 +149,41 @@ class Frame:
         return np.asarray(p) @ self.rot + self.centre
 
 
-def canonical_frame(points: np.ndarray) -> Frame:
-    """Centroid and a yaw from the horizontal principal axis, signed by the third moment (the
-    heavier tail, e.g. a mug's handle, points to +x). For shapes round about z the yaw is
+def profile_skew(along: np.ndarray, across: np.ndarray, z: np.ndarray, bins: int = 24) -> float:
+    """Third moment of the object's bulk along an axis: slices across it, each weighted by its
+    cross-section's bounding box (width x height), so sparse or dense sampling of a side does
+    not move it (a completed single view is sampled densely where the camera saw)."""
+    lo, span = along.min(), max(float(np.ptp(along)), 1e-9)
+    idx = np.minimum(((along - lo) / span * bins).astype(int), bins - 1)
+    count = np.bincount(idx, minlength=bins)
+    extent = []
+    for v in (across, z):
+        top, bottom = np.full(bins, -np.inf), np.full(bins, np.inf)
+        np.maximum.at(top, idx, v)
+        np.minimum.at(bottom, idx, v)
+        extent.append(np.where(count > 0, top - bottom, 0.0) + 1e-4)
+    weight = np.where(count >= 3, extent[0] * extent[1], 0.0)
+    centres = lo + (np.arange(bins) + 0.5) * span / bins
+    x = centres - np.sum(weight * centres) / weight.sum()
+    return float(np.sum(weight * x**3) / weight.sum())
+
+
+def canonical_frame(points: np.ndarray, sign: str = "profile") -> Frame:
+    """Centroid and a yaw from the horizontal principal axis, pointed to the object's heavier
+    end (e.g. a mug's handle to +x): by the bulk's profile (`profile_skew`) or, as models
+    trained before it, by the points' third moment. For shapes round about z the yaw is
     arbitrary, as it may be: their grasps are too."""
     pts = np.asarray(points, dtype=np.float64)
     centre = pts.mean(axis=0)
     xy = pts[:, :2] - centre[:2]
     vals, vecs = np.linalg.eigh(xy.T @ xy / len(xy))
     axis = vecs[:, 1]
-    if float(np.sum((xy @ axis) ** 3)) < 0:
+    along = xy @ axis
+    if sign == "profile":
+        heavier = profile_skew(along, xy @ np.array([-axis[1], axis[0]]), pts[:, 2])
+    else:
+        heavier = float(np.sum(along**3))
+    if heavier < 0:
         axis = -axis
     c, s = axis
     rot = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
@@ -257,7 +291,7 @@ class Prepared:
 
 def prepare_cloud(points: np.ndarray, config: InteractionConfig, seed: int = 0) -> Prepared:
     pts = subsample(np.asarray(points, dtype=np.float64), config.points, seed)
-    frame = canonical_frame(pts)
+    frame = canonical_frame(pts, config.frame_sign)
     return Prepared(frame, frame.to_canonical(pts) * SCALE, grouping(pts, config.levels("object")))
 
 

@@ -279,10 +279,12 @@ def augment(
     return s * points @ rot.T, w, s * anchors @ rot.T
 
 
-def training_frame(pts: np.ndarray, turn_share: float, rng: np.random.Generator) -> Frame:
+def training_frame(
+    pts: np.ndarray, sign: str, turn_share: float, rng: np.random.Generator
+) -> Frame:
     """The cloud's canonical frame, turned half round about z (canonical x and y change sign)
     for a `turn_share` of the calls; no random draw at 0, so runs without it are unchanged."""
-    frame = canonical_frame(pts)
+    frame = canonical_frame(pts, sign)
     if turn_share > 0 and rng.random() < turn_share:
         return Frame(frame.centre, np.diag([-1.0, -1.0, 1.0]) @ frame.rot)
     return frame
@@ -399,7 +401,7 @@ class Batcher:
             w, anc = self.wrist[i], self.anchors[i]
             if self.settings.augment:
                 pts, w, anc = augment(pts, w, anc, rng)
-            frame = training_frame(pts, self.settings.turn_share, rng)
+            frame = training_frame(pts, self.config.frame_sign, self.settings.turn_share, rng)
             xyz.append(frame.to_canonical(pts) * 10.0)
             xs.append(self.x(i, w, anc, frame))
             g = self.cache.groups(cat, seed, self.config)[k]
@@ -451,7 +453,14 @@ def x_statistics(batcher: Batcher, rng: np.random.Generator, n: int = 4096) -> t
         pts, w, a = augment(
             item["points"][0].astype(np.float64), batcher.wrist[i], batcher.anchors[i], rng
         )
-        xs.append(batcher.x(i, w, a, training_frame(pts, batcher.settings.turn_share, rng)))
+        xs.append(
+            batcher.x(
+                i,
+                w,
+                a,
+                training_frame(pts, batcher.config.frame_sign, batcher.settings.turn_share, rng),
+            )
+        )
     x = np.stack(xs)
     mean = x.mean(0)
     mean[3:9] = 0.0
@@ -651,6 +660,8 @@ def train(
     target += " --all-rows" if settings.all_rows else ""
     target += " --intent-flag" if config.intent_flag else ""
     target += " --relabel" if settings.relabel else ""
+    target += f" --frame-sign {config.frame_sign}" if config.frame_sign != "profile" else ""
+    target += f" --turn-share {settings.turn_share:g}" if settings.turn_share else ""
     if settings.anchors_on_part != TrainSettings.anchors_on_part:
         target += f" --anchors-on-part {settings.anchors_on_part}"
     if settings.unmet_weight != TrainSettings.unmet_weight:

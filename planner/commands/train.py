@@ -73,6 +73,14 @@ def register(sub: argparse._SubParsersAction) -> None:
         "handle' (default 0.2; 0 turns it off)",
     )
     i.add_argument(
+        "--frame-sign",
+        choices=("profile", "moment"),
+        default="profile",
+        help="how the object's frame tells its ends apart: profile (where the cross-sections "
+        "are large; default) or moment (the points' third moment, as the shipped direct "
+        "weights were trained)",
+    )
+    i.add_argument(
         "--turn-share",
         type=share,
         default=0.0,
@@ -184,7 +192,9 @@ def interaction_setup(args: argparse.Namespace):
     from learned.interaction import InteractionConfig
     from learned.train_interaction import TrainSettings
 
-    config = InteractionConfig(target=args.target, intent_flag=args.intent_flag)
+    config = InteractionConfig(
+        target=args.target, intent_flag=args.intent_flag, frame_sign=args.frame_sign
+    )
     if args.width is not None:
         config.width = args.width
     if args.layers is not None:
