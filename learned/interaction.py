@@ -181,8 +181,10 @@ def canonical_frame(points: np.ndarray, sign: str = "profile") -> Frame:
     along = xy @ axis
     if sign == "profile":
         heavier = profile_skew(along, xy @ np.array([-axis[1], axis[0]]), pts[:, 2])
-    else:
+    elif sign == "moment":
         heavier = float(np.sum(along**3))
+    else:
+        raise ValueError(f"unknown frame sign {sign!r}; one of {FRAME_SIGNS}")
     if heavier < 0:
         axis = -axis
     c, s = axis
