@@ -271,7 +271,7 @@ def replay_pair(
 
     scheduled = run_schedule(
         count,
-        lambda i: _candidate(recorded[i]),
+        lambda ranks: [_candidate(recorded[i]) for i in ranks],
         validate,
         record.part if labelled else None,
         settings,

@@ -40,6 +40,7 @@ from planner.learned_proposer import (
     sample_start,
 )
 from planner.model_proposer import HandGeometry, ModelProposer
+from planner.parallel import forked_map, processes
 from planner.quality import contact_quality
 from planner.results import CandidateResult, PlanResult, Proposal
 from planner.schedule import run_schedule
@@ -270,11 +271,23 @@ class FunctionalPlanner:
         def program_of(rank: int) -> GraspProgram:
             return shaped_program if proposals[rank].shaped else program
 
-        def solve(rank: int) -> CandidateResult:
+        def solve(ranks: list[int]) -> list[CandidateResult]:
+            """The proposals solved and scored, shared over `schedule.solve_processes`
+            (planner.parallel); D(R,O)'s targets and the intent checks (torch) run here."""
+            made = {rank: self._prepare(proposals[rank]) for rank in ranks}
+            drake = all(self._drake_solve(proposals[rank]) for rank in ranks)
+            count = processes(self.settings.schedule.solve_processes) if drake else 1
+            solved = forked_map(solve_one, ranks, count)
+            return [finish(cand, made[cand.rank]) for cand in solved]
+
+        def solve_one(rank: int) -> CandidateResult:
             proposal = proposals[rank]
             top = table_top if proposal.shaped else None
-            cand = self._solve(program_of(rank), obj, rank, proposal, top)
-            if rank == 0:
+            return self._solve(program_of(rank), obj, rank, proposal, top)
+
+        def finish(cand: CandidateResult, made: dict[str, float]) -> CandidateResult:
+            cand.times.update(made)
+            if cand.rank == 0:
                 cand.times.update(times)
             if check_intent and cand.solve.ok:
                 t0 = time.perf_counter()
@@ -333,18 +346,37 @@ class FunctionalPlanner:
             top = float(table[:, 2].max())
         return grasp_program(self.hand, pieces, replace(self.settings.program, **changes)), top
 
-    def _solve(self, program, obj, rank, proposal, table_top=None) -> CandidateResult:
-        """Solve one proposal and score its contacts (epsilon and task quality at the grasp)."""
-        times = {}
-        if proposal.pending_targets is not None:  # D(R,O), made when the proposal is solved
-            t0 = time.perf_counter()
-            made = proposal.pending_targets()
-            proposal.point_index, proposal.point_targets = made.index, rounded(made.targets)
-            proposal.point_weights, proposal.pending_targets = made.weights, None
-            times["dro"] = time.perf_counter() - t0
+    def _prepare(self, proposal: Proposal) -> dict[str, float]:
+        """Make the proposal's pending D(R,O) targets (learned samples: made when solved, in
+        this process, as torch runs here); the time it took, as a stage."""
+        if proposal.pending_targets is None:
+            return {}
+        t0 = time.perf_counter()
+        made = proposal.pending_targets()
+        proposal.point_index, proposal.point_targets = made.index, rounded(made.targets)
+        proposal.point_weights, proposal.pending_targets = made.weights, None
+        return {"dro": time.perf_counter() - t0}
+
+    def _drake_solve(self, proposal: Proposal) -> bool:
+        """Whether the proposal is solved by the Drake program (which may run in a forked
+        process), not drawn as is or fitted by torch (which stay here)."""
+        fit = proposal.kind == "learned" and self.settings.learned.solver == "fit"
+        return proposal.kind != "direct" and not fit
+
+    def _solve(
+        self,
+        program: GraspProgram,
+        obj: ObjectModel,
+        rank: int,
+        proposal: Proposal,
+        table_top: float | None = None,
+    ) -> CandidateResult:
+        """Solve one proposal (its D(R,O) targets already made: `_prepare`) and score its
+        contacts: epsilon and task quality at the grasp, a Liftup table's contacts left out.
+        No torch here: this may run in a forked process (planner.parallel)."""
         if proposal.kind == "direct":
             solved = as_drawn(program, proposal)
-        elif proposal.kind == "learned" and self.settings.learned.solver == "fit":
+        elif not self._drake_solve(proposal):
             solved = fitted(program, proposal)
         else:
             solved = program.solve(
@@ -359,7 +391,7 @@ class FunctionalPlanner:
                     palm_target=proposal.palm_target,
                 )
             )
-        cand = CandidateResult(rank, proposal, solved, times={**times, "solve": solved.solve_time})
+        cand = CandidateResult(rank, proposal, solved, times={"solve": solved.solve_time})
         if solved.ok:
             t0 = time.perf_counter()
             points, inward = program.contacts(

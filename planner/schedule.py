@@ -48,14 +48,15 @@ def validation_key(
 
 def run_schedule(
     count: int,
-    solve: Callable[[int], CandidateResult],
+    solve: Callable[[list[int]], list[CandidateResult]],
     validate: Callable[[CandidateResult], None],
     part: str,
     settings: PlannerSettings,
 ) -> Scheduled:
     """Solve proposals 0..count-1 a batch at a time and validate the solved candidates best
     first, until one holds on `part` and meets its intent, or `max_candidates` are validated
-    (the fields named here are those of `settings.schedule`).
+    (the fields named here are those of `settings.schedule`). `solve` solves the proposals of
+    the ranks it is given (a batch at a time, so that they may be solved in parallel).
 
     Candidates whose solved configuration meets the intent (`intent_ok`, planner.intent) are
     validated before the others for the first `intent_first` validations; after them the
@@ -121,7 +122,7 @@ def run_schedule(
     while searching() > 0 and position < s.max_candidates:
         first = len(candidates)
         size = min(count if sweeping() else s.solve_batch, searching())
-        solved = [solve(i) for i in range(first, min(first + size, count))]
+        solved = solve(list(range(first, min(first + size, count))))
         candidates.extend(solved)
         queue += [c for c in solved if c.solve.ok and c.quality >= s.min_quality]
         deferred += [c for c in solved if c.solve.ok and c.quality < s.min_quality]

@@ -74,10 +74,19 @@ class ScheduleSettings:
     # intent; searching every proposal (before the by-part proposals were added in turn),
     # 83/65/77% (docs/intent_log.md)
     intent_search: int | None = None
+    # processes a batch of solves is shared over (planner.parallel: forked, results identical
+    # to solving one by one). None: one per core this process may use, 1 in a pool worker
+    # (eval.benchmark, batch jobs: their workers already share the cores).
+    solve_processes: int | None = None
 
     def __post_init__(self) -> None:
         if self.ranking not in RANKINGS:
             raise PlanningError(f"unknown schedule.ranking {self.ranking!r}; use one of {RANKINGS}")
+        if self.solve_processes is not None and self.solve_processes < 1:
+            raise PlanningError(
+                f"schedule.solve_processes must be 1 or more (or None: one per core), "
+                f"got {self.solve_processes}"
+            )
         if self.intent_first < 0 or (self.intent_search is not None and self.intent_search < 0):
             raise PlanningError(
                 "schedule.intent_first and schedule.intent_search must be 0 or more "

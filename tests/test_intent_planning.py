@@ -110,7 +110,7 @@ def _fake(monkeypatch, intent_ok, holds) -> None:
     from planner import functional
     from planner.grasp_program import SolveResult
 
-    solving = []  # the rank being solved: the intent check follows its solve
+    solving = []  # the ranks solved, in order: their intent checks follow in the same order
 
     def fake_solve(self, program, obj, rank, proposal, table_top=None):
         solving.append(rank)
@@ -123,8 +123,9 @@ def _fake(monkeypatch, intent_ok, holds) -> None:
     monkeypatch.setattr(FunctionalPlanner, "_solve", fake_solve)
     monkeypatch.setattr(FunctionalPlanner, "_validate", fake_validate)
     monkeypatch.setattr(
-        functional, "check_configuration", lambda *args: _check(intent_ok(solving[-1]))
+        functional, "check_configuration", lambda *args: _check(intent_ok(solving.pop(0)))
     )
+    monkeypatch.setattr(functional, "processes", lambda setting: 1)  # the fakes count here
 
 
 def test_candidates_meeting_the_intent_are_validated_first_where_asked(monkeypatch, mug):

@@ -212,15 +212,19 @@ class HandModel:
     def check_joints(self, q, what: str = "joint vector") -> None:
         """Raise HandError unless q (a torch tensor, numpy array or list) holds numbers of shape
         (..., dof) that are all finite."""
-        values = _numeric(q, f"{what} for hand {self.name}")
+        what = f"{what} for hand {self.name}"
+        # no torch for arrays: the grasp program checks here in forked processes, where torch
+        # may hang after the parent's OpenMP threads (planner.parallel)
+        values = _numeric(q, what).detach() if isinstance(q, torch.Tensor) else _real_array(q, what)
         shape = tuple(values.shape)
         if not shape or shape[-1] != self.dof:
             raise HandError(
-                f"{what} for hand {self.name} has length {shape[-1] if shape else 0}; "
+                f"{what} has length {shape[-1] if shape else 0}; "
                 f"expected {self.dof} values in this order: {', '.join(self.joint_names)}"
             )
-        if not bool(torch.isfinite(values.detach()).all()):
-            raise HandError(f"{what} for hand {self.name} contains NaN or infinite values")
+        finite = torch.isfinite(values) if isinstance(values, torch.Tensor) else np.isfinite(values)
+        if not bool(finite.all()):
+            raise HandError(f"{what} contains NaN or infinite values")
 
     def batch(self, wrist, q) -> tuple[torch.Tensor, torch.Tensor]:
         """`wrist` and `q` checked and as tensors of one batch: (B, 7) or (B, 4, 4) and (B, dof).
@@ -446,12 +450,18 @@ def _numeric(value, what: str) -> torch.Tensor:
     """`value` (torch tensor, numpy array, list or number) as a real-valued tensor: a tensor is
     returned as it is (ints included), anything else converted once (numpy's float dtype kept,
     whole numbers as float64). HandError for booleans, text, ragged lists and other objects."""
-    if value is None:
-        raise HandError(f"{what} must be numbers (a torch tensor, numpy array or list), got None")
     if isinstance(value, torch.Tensor):
         if value.dtype == torch.bool or value.is_complex():
             raise HandError(f"{what} must hold real numbers, got a {value.dtype} tensor")
         return value
+    return torch.tensor(_real_array(value, what))
+
+
+def _real_array(value, what: str) -> np.ndarray:
+    """`value` (numpy array, list or number) as a real numpy array (float dtype kept, whole
+    numbers as float64); HandError for booleans, text, ragged lists and other objects."""
+    if value is None:
+        raise HandError(f"{what} must be numbers (a torch tensor, numpy array or list), got None")
     try:
         arr = np.asarray(value)
         if arr.dtype.kind == "O":
@@ -466,7 +476,7 @@ def _numeric(value, what: str) -> torch.Tensor:
     if arr.dtype.kind != "f":
         kind = "booleans" if arr.dtype.kind == "b" else f"{arr.dtype} values"
         raise HandError(f"{what} must hold real numbers, got {kind}: {_show(value)}")
-    return torch.tensor(arr)
+    return arr
 
 
 def _check_wrist(wrist: torch.Tensor, hand: str) -> None:

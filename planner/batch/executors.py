@@ -41,6 +41,10 @@ def one_thread() -> None:
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     import torch
 
+    from planner.parallel import mark_pool_worker
+
+    mark_pool_worker()  # and one process per plan's solves
+
     if torch.get_num_threads() != 1:
         torch.set_num_threads(1)
 

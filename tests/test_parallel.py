@@ -1,0 +1,88 @@
+"""A plan's solves shared over forked processes (planner.parallel): the same results."""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pytest
+
+import planner.parallel as parallel
+from models.errors import PlanningError
+from models.objects import make_object
+from planner.functional import FunctionalPlanner
+from planner.parallel import forked_map, processes
+from planner.settings import LearnedSettings, PlannerSettings, ScheduleSettings
+
+pytestmark = pytest.mark.skipif(not hasattr(os, "fork"), reason="needs os.fork")
+
+
+def _square_with_pid(x: int) -> tuple[int, int]:
+    return x * x, os.getpid()
+
+
+def test_forked_map_gives_the_serial_results_in_order_and_really_forks():
+    answer = forked_map(_square_with_pid, range(7), 3)
+    assert [a for a, _ in answer] == [x * x for x in range(7)]
+    pids = {pid for _, pid in answer}
+    assert os.getpid() in pids and len(pids) == 3  # items 0, 3, 6 here; the rest in children
+    assert forked_map(_square_with_pid, [2], 4) == [(4, os.getpid())]  # one item: no fork
+
+
+def test_an_error_in_a_child_is_raised_here_as_serial_solving_would():
+    def fail_on_three(x: int) -> int:
+        if x == 3:
+            raise PlanningError("three is refused")
+        return x
+
+    with pytest.raises(PlanningError, match="three is refused"):
+        forked_map(fail_on_three, range(6), 2)
+
+
+def test_a_child_that_dies_has_its_share_solved_here():
+    parent = os.getpid()
+
+    def die_in_children(x: int) -> int:
+        if os.getpid() != parent:
+            os._exit(3)  # a crashed child: nothing comes back through the pipe
+        return x + 1
+
+    assert forked_map(die_in_children, range(5), 2) == [1, 2, 3, 4, 5]
+
+
+def test_processes_follow_the_setting_the_cores_and_pool_workers(monkeypatch):
+    monkeypatch.setattr(parallel, "_IN_POOL", False)
+    assert processes(3) == 3
+    assert processes(None) == parallel.available_cores()
+    monkeypatch.setattr(parallel, "_IN_POOL", True)
+    assert processes(None) == 1 and processes(2) == 2
+    with pytest.raises(PlanningError, match="solve_processes"):
+        ScheduleSettings(solve_processes=0)
+
+
+@pytest.mark.parametrize("hand_name", ["allegro", "leap", "shadow"])
+def test_a_plan_solved_in_two_processes_is_the_plan_solved_in_one(hand_name):
+    cloud_mug = make_object("mug", 3)
+    results = []
+    for count in (1, 2):
+        settings = PlannerSettings(
+            proposer="learned",
+            schedule=ScheduleSettings(max_candidates=2, solve_processes=count),
+            learned=LearnedSettings(samples=4, region_proposals=2),
+        )
+        results.append(
+            FunctionalPlanner(hand_name, settings).plan(cloud_mug, "Use a mug by handle")
+        )
+    serial, forked = results
+    assert len(serial.candidates) == len(forked.candidates) >= 4
+    for a, b in zip(serial.candidates, forked.candidates, strict=True):
+        assert (a.rank, a.solve.ok, a.quality, a.task_quality) == (
+            b.rank,
+            b.solve.ok,
+            b.quality,
+            b.task_quality,
+        )
+        assert np.array_equal(a.solve.wrist, b.solve.wrist) and np.array_equal(a.solve.q, b.solve.q)
+        assert (a.order, a.success) == (b.order, b.success)
+        if a.proposal.kind == "learned":  # D(R,O)'s targets made here, before the fork
+            assert "dro" in a.times and "dro" in b.times
