@@ -11,6 +11,7 @@ every candidate's outcome.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from functools import cached_property, partial
 from typing import Any
@@ -206,18 +207,15 @@ class FunctionalPlanner:
             )
         # facing samples first, then best anchor closure; stable: sample order breaks ties
         proposals.sort(key=lambda p: (not p.shaped, -p.anchor_quality))
-        t0 = time.perf_counter()
+        # the region proposals come after the samples, made only if the search reaches them
+        later = None
         if s.learned.region_proposals > 0 and s.learned.solver == "drake" and not direct:
-            proposals += self._region_proposals(obj, drawn.anchors, meaning)
-        region_time = time.perf_counter() - t0
+            later = partial(self._region_proposals, obj, drawn.anchors, meaning)
+        region_shaped = later is not None and meaning is not None and label_free(meaning.intent)
         shaped_program, table_top = program, None
-        if any(p.shaped for p in proposals):
+        if any(p.shaped for p in proposals) or region_shaped:
             shaped_program, table_top = self._intent_program(obj, meaning)
-        times = {
-            "build": time.perf_counter() - start - drawn_time - region_time,
-            "region": region_time,
-            **drawn.times,
-        }
+        times = {"build": time.perf_counter() - start - drawn_time, **drawn.times}
         voter = None
         if part is None and s.learned.region_vote > 0 and not direct:
             voter = region_object(obj, drawn.anchors, s.learned.region_vote, 1)
@@ -230,6 +228,7 @@ class FunctionalPlanner:
             (program, shaped_program, table_top),
             times,
             voter,
+            later,
         )
         result.understood = understood.to_dict()
         result.proposer = "direct" if direct else "learned"
@@ -259,12 +258,15 @@ class FunctionalPlanner:
         programs: tuple[GraspProgram, GraspProgram, float | None],
         times: dict[str, float],
         voter: ObjectModel | None = None,
+        later: Callable[[], list[Proposal]] | None = None,
     ) -> PlanResult:
         """Solve, schedule and validate the proposals (planner.schedule). `programs`: the
         program, the one for proposals shaped by the intent, and that one's table top; `times`
         (building and proposing) go to the first candidate. `part` None: any part counts,
         unless `voter` (the region the learned samples point at, `learned.region_vote`) says
-        which held grasps count first; the candidates' `part` stays None."""
+        which held grasps count first; the candidates' `part` stays None. `later`: makes the
+        proposals that follow these, if the search reaches them (planner.schedule `more`);
+        the time it takes goes to the first of them as stage "region"."""
         notes = []
         program, shaped_program, table_top = programs
 
@@ -285,8 +287,23 @@ class FunctionalPlanner:
             top = table_top if proposal.shaped else None
             return self._solve(program_of(rank), obj, rank, proposal, top)
 
+        def more() -> int:
+            t0 = time.perf_counter()
+            found = later()
+            spent = {"region": time.perf_counter() - t0}
+            # on the first of them, or (none made) on the last candidate solved
+            late_times[len(proposals)] = spent
+            if not found and finished:
+                finished[-1].times.update(spent)
+            proposals.extend(found)
+            return len(found)
+
+        late_times: dict[int, dict[str, float]] = {}
+        finished: list[CandidateResult] = []
+
         def finish(cand: CandidateResult, made: dict[str, float]) -> CandidateResult:
-            cand.times.update(made)
+            cand.times.update(made | late_times.get(cand.rank, {}))
+            finished.append(cand)
             if cand.rank == 0:
                 cand.times.update(times)
             if check_intent and cand.solve.ok:
@@ -303,7 +320,9 @@ class FunctionalPlanner:
                 cand.part = grasp_part(self.hand, cand.solve.wrist, cand.solve.q, voter)
 
         wanted = REGION_PART if voter is not None else part
-        scheduled = run_schedule(len(proposals), solve, validate, wanted, self.settings)
+        scheduled = run_schedule(
+            len(proposals), solve, validate, wanted, self.settings, more if later else None
+        )
         candidates = scheduled.candidates
         if voter is not None:
             if scheduled.on_part is None and scheduled.fallback is not None:

@@ -52,11 +52,15 @@ def run_schedule(
     validate: Callable[[CandidateResult], None],
     part: str,
     settings: PlannerSettings,
+    more: Callable[[], int] | None = None,
 ) -> Scheduled:
     """Solve proposals 0..count-1 a batch at a time and validate the solved candidates best
     first, until one holds on `part` and meets its intent, or `max_candidates` are validated
     (the fields named here are those of `settings.schedule`). `solve` solves the proposals of
     the ranks it is given (a batch at a time, so that they may be solved in parallel).
+    `more`: proposals after the first `count` that are made only if the search reaches them
+    (the learned proposer's region proposals: most plans end before): called at most once,
+    when the first `count` are solved or the sweep begins, it makes them and says how many.
 
     Candidates whose solved configuration meets the intent (`intent_ok`, planner.intent) are
     validated before the others for the first `intent_first` validations; after them the
@@ -88,7 +92,7 @@ def run_schedule(
         leaving the rest queued, when the sweep is due and proposals are left unsolved."""
         nonlocal position, found, fallback, off_intent, solved_at_off
         while queue and position < s.max_candidates:
-            if sweeping() and searching() > 0:
+            if sweeping() and remaining() > 0:
                 return False
             prefer = off_intent is not None or position < s.intent_first
             queue.sort(key=lambda c: validation_key(c, s.ranking, prefer))
@@ -118,8 +122,15 @@ def run_schedule(
             return left
         return min(left, solved_at_off + s.intent_search - len(candidates))
 
+    def remaining() -> int:
+        """`searching()`, with the later proposals made (`more`) once they are due."""
+        nonlocal count, more
+        if more is not None and (sweeping() or len(candidates) >= count):
+            count, more = count + more(), None
+        return searching()
+
     solved_at_off = 0
-    while searching() > 0 and position < s.max_candidates:
+    while position < s.max_candidates and remaining() > 0:
         first = len(candidates)
         size = min(count if sweeping() else s.solve_batch, searching())
         solved = solve(list(range(first, min(first + size, count))))

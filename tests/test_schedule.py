@@ -1,0 +1,58 @@
+"""The schedule's later proposals (planner.schedule `more`): made only when the search gets there."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from planner.grasp_program import SolveResult
+from planner.results import CandidateResult, Proposal
+from planner.schedule import run_schedule
+from planner.settings import PlannerSettings, ScheduleSettings
+
+
+def _candidate(rank: int) -> CandidateResult:
+    wrist, q = np.array([0, 0, 0, 1.0, 0, 0, 0]), np.zeros(16)
+    proposal = Proposal(wrist, q, np.zeros((4, 3)), np.zeros((4, 3)), 0.0)
+    solved = SolveResult(wrist, q, True, 0.001, 0.0, True, "fake", 0.0)
+    return CandidateResult(rank, proposal, solved, quality=0.5, task_quality=1 - rank / 100)
+
+
+def _run(holder: int, count: int, later: int, **schedule) -> tuple[list[list[int]], int]:
+    """Solve batches asked for, and how often `more` was called; proposal `holder` holds (the
+    schedule must find it; -1: none holds)."""
+    batches, calls = [], []
+
+    def solve(ranks: list[int]) -> list[CandidateResult]:
+        batches.append(ranks)
+        return [_candidate(r) for r in ranks]
+
+    def validate(cand: CandidateResult) -> None:
+        cand.success, cand.part = cand.rank == holder, "handle"
+
+    def more() -> int:
+        calls.append(1)
+        return later
+
+    settings = PlannerSettings(schedule=ScheduleSettings(**schedule))
+    found = run_schedule(count, solve, validate, "handle", settings, more).found
+    assert (found.rank if found is not None else -1) == holder
+    return batches, len(calls)
+
+
+def test_later_proposals_are_not_made_when_an_early_grasp_holds():
+    batches, calls = _run(holder=1, count=8, later=4, solve_batch=4)
+    assert batches == [[0, 1, 2, 3]] and calls == 0
+
+
+def test_later_proposals_are_made_once_and_solved_after_the_first():
+    # batch by batch: the later ones follow the first 8 in batches of their own
+    batches, calls = _run(10, 8, 4, solve_batch=4, sweep_after=None, max_candidates=12)
+    assert batches == [[0, 1, 2, 3], [4, 5, 6, 7], [8, 9, 10, 11]] and calls == 1
+    # the sweep (after 3 failed validations) solves them with the rest, as if made at once
+    batches, calls = _run(10, 8, 4, solve_batch=4, sweep_after=3, max_candidates=12)
+    assert batches == [[0, 1, 2, 3], list(range(4, 12))] and calls == 1
+
+
+def test_where_none_are_made_the_search_ends_with_the_first():
+    batches, calls = _run(-1, 8, 0, solve_batch=4, sweep_after=None, max_candidates=12)
+    assert batches == [[0, 1, 2, 3], [4, 5, 6, 7]] and calls == 1
