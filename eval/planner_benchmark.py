@@ -24,6 +24,7 @@ from tqdm import tqdm
 from models.errors import PlanningError
 from models.hands import available_hands
 from models.objects import HELDOUT, categories, instructions, make_object, seeds
+from models.objects.names import INTENTS
 from planner.batch.executors import one_thread
 from planner.commands.validate import parse_overrides
 from planner.functional import FunctionalPlanner
@@ -252,6 +253,13 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--limit", type=int, default=None, help="first N pairs only (quick look)")
     parser.add_argument(
+        "--intents",
+        nargs="+",
+        choices=INTENTS,
+        default=None,
+        help="only the instructions of these intents (e.g. --intents Liftup)",
+    )
+    parser.add_argument(
         "--out", type=Path, default=None, help="write per-pair records with candidates (JSONL)"
     )
     parser.add_argument(
@@ -272,6 +280,7 @@ def main() -> None:
     jobs = [
         (*p, args.candidates, tuple(args.set))
         for p in pairs(args.split, args.objects_per_category, args.hands)
+        if args.intents is None or p[3].split(" ", 1)[0] in args.intents
     ][: args.limit]
     records: list[PairRecord] = []
     with ProcessPoolExecutor(args.workers, initializer=one_thread) as pool:
@@ -282,6 +291,7 @@ def main() -> None:
     print(
         f"split {args.split}, {args.objects_per_category} objects per category, "
         f"up to {args.candidates} candidates, paper validation preset"
+        + (f", intents {' '.join(args.intents)}" if args.intents else "")
         + (f", settings {' '.join(args.set)}" if args.set else "")
     )
     print_table(summarize(records))
