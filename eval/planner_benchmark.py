@@ -67,13 +67,18 @@ def read_records(path: Path) -> list[PairRecord]:
     return [PairRecord(**{k: v for k, v in row.items() if k in names}) for row in rows]
 
 
-def pairs(split: str, per_category: int, hands: list[str]) -> list[tuple[str, str, int, str]]:
+def pairs(
+    split: str, per_category: int, hands: list[str], intents: Sequence[str] | None = None
+) -> list[tuple[str, str, int, str]]:
+    """(hand, category, seed, instruction) of the split; `intents`: only theirs (None: all)."""
     out = []
     for cat in categories():
         if (split == "heldout") != (cat in HELDOUT):
             continue
         for seed in seeds(cat, split, per_category):
             for ins in instructions(cat):
+                if intents is not None and ins.intent not in intents:
+                    continue
                 for hand in hands:
                     out.append((hand, cat, seed, ins.text))
     return out
@@ -279,8 +284,7 @@ def main() -> None:
     planner_settings(args.candidates, args.set)  # fail early on a bad override
     jobs = [
         (*p, args.candidates, tuple(args.set))
-        for p in pairs(args.split, args.objects_per_category, args.hands)
-        if args.intents is None or p[3].split(" ", 1)[0] in args.intents
+        for p in pairs(args.split, args.objects_per_category, args.hands, args.intents)
     ][: args.limit]
     records: list[PairRecord] = []
     with ProcessPoolExecutor(args.workers, initializer=one_thread) as pool:
@@ -302,10 +306,12 @@ def main() -> None:
             f"{r['intent_ok']:>9.1%}"
         )
     d = distinct_grasps(records)
-    print(
-        f"distinct grasps: {d['pairs']} pairs of intents on the same (hand, object, part): mean "
-        f"wrist distance {d['mean_wrist_distance_cm']:.1f} cm, same grasp {d['same_grasp']:.0%}"
-    )
+    if d["pairs"]:  # none where one intent was planned (--intents)
+        print(
+            f"distinct grasps: {d['pairs']} pairs of intents on the same (hand, object, part): "
+            f"mean wrist distance {d['mean_wrist_distance_cm']:.1f} cm, same grasp "
+            f"{d['same_grasp']:.0%}"
+        )
     if args.by_part:
         print_by_part(records)
 

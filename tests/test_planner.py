@@ -589,3 +589,12 @@ def test_the_settings_import_from_the_package():
         assert getattr(planner, name) is getattr(planner.settings, name)
     with pytest.raises(AttributeError, match="no attribute 'Nothing'"):
         planner.Nothing  # noqa: B018
+
+
+def test_the_planner_benchmark_plans_the_intents_asked_for():
+    from eval.planner_benchmark import pairs
+
+    every = pairs("test", 1, ["allegro"])
+    lifts = pairs("test", 1, ["allegro"], ["Liftup"])
+    assert lifts and all(text.startswith("Liftup ") for *_, text in lifts)
+    assert lifts == [p for p in every if p[3].startswith("Liftup ")]
