@@ -65,11 +65,17 @@ def forked_map(fn: Callable[[T], R], items: Sequence[T], count: int) -> list[R]:
     count = min(count, len(items))
     if count <= 1:
         return [fn(x) for x in items]
-    children = []  # (pid, read end, indices)
+    children = []  # (pid, read end, indices); pid None: the fork failed, solved here
     for k in range(1, count):
         share = list(range(k, len(items), count))
         read, write = os.pipe()
-        pid = os.fork()
+        try:
+            pid = os.fork()
+        except OSError:  # no memory or processes left for a child: this process solves it
+            os.close(read)
+            os.close(write)
+            children.append((None, None, share))
+            continue
         if pid == 0:  # the child: solve its share, send it back, leave without cleanup
             os.close(read)
             _child(fn, [items[i] for i in share], write)
@@ -77,8 +83,8 @@ def forked_map(fn: Callable[[T], R], items: Sequence[T], count: int) -> list[R]:
         children.append((pid, read, share))
     results: dict[int, R] = {i: fn(items[i]) for i in range(0, len(items), count)}
     for pid, read, share in children:
-        answer = _collect(pid, read)
-        if answer is None:  # the child failed: its share is solved here
+        answer = None if pid is None else _collect(pid, read)
+        if answer is None:  # the child failed (or was never made): its share is solved here
             answer = [("ok", fn(items[i])) for i in share]
         for i, (kind, value) in zip(share, answer, strict=True):
             if kind == "error":

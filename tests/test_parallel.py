@@ -50,6 +50,14 @@ def test_a_child_that_dies_has_its_share_solved_here():
     assert forked_map(die_in_children, range(5), 2) == [1, 2, 3, 4, 5]
 
 
+def test_where_no_child_can_be_forked_everything_is_solved_here(monkeypatch):
+    def no_fork() -> int:
+        raise OSError(12, "Cannot allocate memory")
+
+    monkeypatch.setattr(os, "fork", no_fork)
+    assert forked_map(_square_with_pid, range(4), 2) == [(x * x, os.getpid()) for x in range(4)]
+
+
 def test_processes_follow_the_setting_the_cores_and_pool_workers(monkeypatch):
     monkeypatch.setattr(parallel, "_IN_POOL", False)
     assert processes(3) == 3
