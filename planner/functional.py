@@ -392,7 +392,8 @@ class FunctionalPlanner:
     ) -> CandidateResult:
         """Solve one proposal (its D(R,O) targets already made: `_prepare`) and score its
         contacts: epsilon and task quality at the grasp, a Liftup table's contacts left out.
-        No torch here: this may run in a forked process (planner.parallel)."""
+        A Drake solve uses no torch, so it may run in a forked process (planner.parallel); the
+        ablations' samples (drawn as is, fitted by torch) are solved in this one."""
         if proposal.kind == "direct":
             solved = as_drawn(program, proposal)
         elif not self._drake_solve(proposal):
