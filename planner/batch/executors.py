@@ -34,16 +34,18 @@ def _worker_init(parent: int) -> None:
 
 def one_thread() -> None:
     """One torch/OpenMP thread in this process, and its plans' solves in this process only
-    (planner.parallel): a pool worker on a machine whose cores the workers share. With torch's default (a thread per core), two workers on this 2-core
-    machine each ran a D(R,O) forward in 0.195 s against 0.083 s with one thread each
-    (median of 30, both workers at once); eval.benchmark's runs without this pin recorded
-    D(R,O) at 0.23-0.27 s a sample against 0.10 s with it."""
+    (planner.parallel): a pool worker on a machine whose cores the workers share. With
+    torch's default (a thread per core), two workers on this 2-core machine each ran a D(R,O)
+    forward in 0.195 s against 0.083 s with one thread each (median of 30, both workers at
+    once); eval.benchmark's runs without this pin recorded D(R,O) at 0.23-0.27 s a sample
+    against 0.10 s with it."""
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     import torch
 
     from planner.parallel import mark_pool_worker
 
     mark_pool_worker()
+
     if torch.get_num_threads() != 1:
         torch.set_num_threads(1)
 
