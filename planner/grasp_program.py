@@ -655,6 +655,12 @@ _PROGRAMS: dict[tuple, GraspProgram] = {}
 _MAX_PROGRAMS = 16
 
 
+def forget_programs() -> None:
+    """Drop the cached programs: for timings in which every plan builds its own
+    (eval.plan_time), as a plan on a new object does."""
+    _PROGRAMS.clear()
+
+
 def grasp_program(hand: HandModel, obj, settings: ProgramSettings | None = None) -> GraspProgram:
     """The cached program for (hand, object, settings): built once, reused by every solve."""
     obj = as_collision_object(obj)

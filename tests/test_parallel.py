@@ -94,3 +94,15 @@ def test_a_plan_solved_in_two_processes_is_the_plan_solved_in_one(hand_name):
         assert (a.order, a.success) == (b.order, b.success)
         if a.proposal.kind == "learned":  # D(R,O)'s targets made here, before the fork
             assert "dro" in a.times and "dro" in b.times
+
+
+@pytest.mark.slow
+def test_the_plan_time_benchmark_plans_each_pair_both_ways(tmp_path):
+    import subprocess
+    import sys
+
+    argv = [sys.executable, "-m", "eval.plan_time", "--hands", "allegro", "--pairs-per-hand", "1"]
+    out = subprocess.run(argv, capture_output=True, text=True, timeout=600, check=True).stdout
+    row = out.strip().splitlines()[-1].split()
+    assert row[0] == "allegro" and row[1] == "1" and row[-1] == "1/1"  # the same candidates
+    assert float(row[2]) > 0 and float(row[3]) > 0
