@@ -19,7 +19,6 @@ import os
 import pickle
 import select
 import time
-import traceback
 from collections.abc import Callable, Sequence
 from typing import TypeVar
 
@@ -81,33 +80,38 @@ def forked_map(fn: Callable[[T], R], items: Sequence[T], count: int) -> list[R]:
             _child(fn, [items[i] for i in share], write)
         os.close(write)
         children.append((pid, read, share))
-    results: dict[int, R] = {i: fn(items[i]) for i in range(0, len(items), count)}
-    for pid, read, share in children:
+    outcomes = {i: _attempt(fn, items[i]) for i in range(0, len(items), count)}
+    for pid, read, share in children:  # every child collected before anything is raised
         answer = None if pid is None else _collect(pid, read)
         if answer is None:  # the child failed (or was never made): its share is solved here
-            answer = [("ok", fn(items[i])) for i in share]
-        for i, (kind, value) in zip(share, answer, strict=True):
-            if kind == "error":
-                raise value
-            results[i] = value
-    return [results[i] for i in range(len(items))]
+            answer = [_attempt(fn, items[i]) for i in share]
+        outcomes.update(zip(share, answer, strict=True))
+    results = []
+    for i in range(len(items)):  # the first item's error, as solving one by one would raise
+        kind, value = outcomes[i]
+        if kind == "error":
+            raise value
+        results.append(value)
+    return results
+
+
+def _attempt(fn: Callable, x) -> tuple[str, object]:
+    """("ok", fn(x)), or ("error", the exception it raised)."""
+    try:
+        return "ok", fn(x)
+    except Exception as error:  # raised later, in item order
+        return "error", error
 
 
 def _child(fn: Callable, items: list, write: int) -> None:
-    """Run in the forked child: every item's result (or its exception) pickled to `write`."""
+    """Run in the forked child: every item's outcome (`_attempt`) pickled to `write`."""
     code = 0
     try:
-        answer = []
-        for x in items:
-            try:
-                answer.append(("ok", fn(x)))
-            except Exception as error:  # the parent raises it as serial solving would
-                answer.append(("error", error))
+        answer = [_attempt(fn, x) for x in items]
         data = pickle.dumps(answer, protocol=pickle.HIGHEST_PROTOCOL)
         with os.fdopen(write, "wb") as pipe:
             pipe.write(data)
-    except BaseException:
-        traceback.print_exc()
+    except BaseException:  # nothing readable reaches the parent, which solves the share itself
         code = 1
     finally:
         os._exit(code)

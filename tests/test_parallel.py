@@ -36,7 +36,16 @@ def test_an_error_in_a_child_is_raised_here_as_serial_solving_would():
         return x
 
     with pytest.raises(PlanningError, match="three is refused"):
-        forked_map(fail_on_three, range(6), 2)
+        forked_map(fail_on_three, range(6), 2)  # 3 is a child's
+
+    def fail_from_two(x: int) -> int:
+        if x >= 2:
+            raise PlanningError(f"{x} is refused")
+        return x
+
+    # the first failing item's error, as one by one (2 is this process's, 3 a child's)
+    with pytest.raises(PlanningError, match="2 is refused"):
+        forked_map(fail_from_two, range(6), 2)
 
 
 def test_a_child_that_dies_has_its_share_solved_here():
