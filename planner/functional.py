@@ -266,7 +266,7 @@ class FunctionalPlanner:
         unless `voter` (the region the learned samples point at, `learned.region_vote`) says
         which held grasps count first; the candidates' `part` stays None. `later`: makes the
         proposals that follow these, if the search reaches them (planner.schedule `more`);
-        the time it takes goes to the first of them as stage "region"."""
+        the time it takes goes to the last candidate solved before, as stage "region"."""
         notes = []
         program, shaped_program, table_top = programs
 
@@ -290,19 +290,15 @@ class FunctionalPlanner:
         def more() -> int:
             t0 = time.perf_counter()
             found = later()
-            spent = {"region": time.perf_counter() - t0}
-            # on the first of them, or (none made) on the last candidate solved
-            late_times[len(proposals)] = spent
-            if not found and finished:
-                finished[-1].times.update(spent)
+            if finished:  # the last candidate solved before carries the time
+                finished[-1].times["region"] = time.perf_counter() - t0
             proposals.extend(found)
             return len(found)
 
-        late_times: dict[int, dict[str, float]] = {}
         finished: list[CandidateResult] = []
 
         def finish(cand: CandidateResult, made: dict[str, float]) -> CandidateResult:
-            cand.times.update(made | late_times.get(cand.rank, {}))
+            cand.times.update(made)
             finished.append(cand)
             if cand.rank == 0:
                 cand.times.update(times)
