@@ -19,6 +19,7 @@ import os
 import pickle
 import select
 import time
+import warnings
 from collections.abc import Callable, Sequence
 from typing import TypeVar
 
@@ -125,6 +126,13 @@ def _collect(pid: int, read: int) -> list | None:
             left = deadline - time.monotonic()
             if left <= 0 or not select.select([read], [], [], left)[0]:
                 os.kill(pid, 9)
+                warnings.warn(
+                    f"a solve process was silent for {CHILD_TIMEOUT:g} s and was stopped; "
+                    "this process solved its share (the plan is complete, only slower). "
+                    "Set schedule.solve_processes=1 to solve in one process.",
+                    RuntimeWarning,
+                    stacklevel=2,
+                )
                 return None
             chunk = os.read(read, 1 << 20)
             if not chunk:

@@ -9,6 +9,9 @@ their total weight, weighted mean and weighted covariance; four points with thos
 regular tetrahedron stretched by the covariance's square root) and the targets X*(q_j) give the
 same cost for every pose. Links whose targets are not rigid within RIGID_TOLERANCE keep their
 costs per point.
+
+numpy only, no torch: the grasp program's solves run in forked processes (planner.parallel),
+and torch in a child forked after the parent ran torch's OpenMP threads hangs.
 """
 
 from __future__ import annotations
@@ -16,9 +19,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import torch
-
-from learned.multilateration import kabsch
 
 RIGID_TOLERANCE = 1e-6  # m: largest residual of a link's targets from one rigid motion
 # unit vertices of a regular tetrahedron: they sum to 0 and sum v v^T = 4/3 I
@@ -66,14 +66,29 @@ def pooled(
     return PointCosts(*(np.concatenate(parts) for parts in zip(*out, strict=True)))
 
 
+def _rigid_motion(
+    p: np.ndarray, t: np.ndarray, w: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The rotation and translation minimising sum w |R p + s - t|^2 (weighted Kabsch, a
+    reflection turned into the nearest rotation), as learned.multilateration.kabsch computes
+    it for batches in torch."""
+    wn = w / max(float(w.sum()), 1e-12)
+    cp, ct = wn @ p, wn @ t
+    u, _, vt = np.linalg.svd((wn[:, None] * (p - cp)).T @ (t - ct))
+    fix = np.ones(3)
+    det = np.linalg.det(vt.T @ u.T)
+    fix[2] = np.sign(det) + (det == 0)
+    rot = vt.T @ (fix[:, None] * u.T)
+    return rot, ct - rot @ cp
+
+
 def _four_points(
     p: np.ndarray, t: np.ndarray, w: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray] | None:
     """Four points with the weighted mean and covariance of `p` (N, 3) and their targets under
     the rigid motion carrying `p` onto `t`; None where no rigid motion does (within
     RIGID_TOLERANCE)."""
-    rot, shift = kabsch(torch.from_numpy(p), torch.from_numpy(t), torch.from_numpy(w))
-    rot, shift = rot.numpy(), shift.numpy()
+    rot, shift = _rigid_motion(p, t, w)
     if np.abs(p @ rot.T + shift - t).max() > RIGID_TOLERANCE:
         return None
     wn = w / w.sum()

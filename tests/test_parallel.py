@@ -59,6 +59,25 @@ def test_a_child_that_dies_has_its_share_solved_here():
     assert forked_map(die_in_children, range(5), 2) == [1, 2, 3, 4, 5]
 
 
+def test_a_silent_child_is_stopped_with_a_warning_and_its_share_solved_here(monkeypatch):
+    """A child stuck past CHILD_TIMEOUT (a lock held at the fork, torch's threads) is killed;
+    its share is solved here, and the user is told why the plan was slow."""
+    import time
+
+    monkeypatch.setattr(parallel, "CHILD_TIMEOUT", 0.5)
+    parent = os.getpid()
+
+    def hang_in_children(x: int) -> int:
+        if os.getpid() != parent:
+            time.sleep(60)
+        return x * 2
+
+    start = time.monotonic()
+    with pytest.warns(RuntimeWarning, match="silent for 0.5 s"):
+        assert forked_map(hang_in_children, range(4), 2) == [0, 2, 4, 6]
+    assert time.monotonic() - start < 30
+
+
 def test_where_no_child_can_be_forked_everything_is_solved_here(monkeypatch):
     def no_fork() -> int:
         raise OSError(12, "Cannot allocate memory")

@@ -60,3 +60,40 @@ def test_targets_that_do_not_move_rigidly_keep_a_cost_each():
     costs = pooled(link, local, np.arange(10), targets, weights)
     assert list(costs.point) == list(range(2, 10))
     np.testing.assert_allclose(costs.targets, targets[2:])
+
+
+def test_pooling_runs_no_torch(monkeypatch):
+    """The solves run in forked processes, where torch hangs after the parent used its
+    threads (planner.parallel): pooling must not call it. Every torch entry point the
+    Kabsch fit would use raises here."""
+    import torch
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("torch called while pooling point costs")
+
+    for name in ("from_numpy", "as_tensor", "tensor"):
+        monkeypatch.setattr(torch, name, refuse)
+    monkeypatch.setattr(torch.linalg, "svd", refuse)
+    rng = np.random.default_rng(2)
+    local = rng.normal(size=(12, 3)) * 0.02
+    rot = Rotation.random(random_state=3).as_matrix()
+    costs = pooled(np.zeros(12, dtype=int), local, np.arange(12), local @ rot.T + 0.1, np.ones(12))
+    assert len(costs.point) == 4
+
+
+def test_rigid_fit_matches_the_batched_kabsch():
+    """The numpy fit the pooling uses gives learned.multilateration.kabsch's motion."""
+    import torch
+
+    from learned.multilateration import kabsch
+    from planner.point_costs import _rigid_motion
+
+    rng = np.random.default_rng(4)
+    for seed in range(5):
+        p = rng.normal(size=(20, 3))
+        t = rng.normal(size=(20, 3))  # no exact motion: the fits must agree anyway
+        w = rng.uniform(0.1, 1.0, 20)
+        rot, shift = _rigid_motion(p, t, w)
+        ref_rot, ref_shift = kabsch(torch.from_numpy(p), torch.from_numpy(t), torch.from_numpy(w))
+        np.testing.assert_allclose(rot, ref_rot.numpy(), atol=1e-12)
+        np.testing.assert_allclose(shift, ref_shift.numpy(), atol=1e-12)
