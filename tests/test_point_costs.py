@@ -89,7 +89,7 @@ def test_rigid_fit_matches_the_batched_kabsch():
     from planner.point_costs import _rigid_motion
 
     rng = np.random.default_rng(4)
-    for seed in range(5):
+    for _ in range(5):
         p = rng.normal(size=(20, 3))
         t = rng.normal(size=(20, 3))  # no exact motion: the fits must agree anyway
         w = rng.uniform(0.1, 1.0, 20)
