@@ -66,9 +66,7 @@ def pooled(
     return PointCosts(*(np.concatenate(parts) for parts in zip(*out, strict=True)))
 
 
-def _rigid_motion(
-    p: np.ndarray, t: np.ndarray, w: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
+def _rigid_motion(p: np.ndarray, t: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The rotation and translation minimising sum w |R p + s - t|^2 (weighted Kabsch, a
     reflection turned into the nearest rotation), as learned.multilateration.kabsch computes
     it for batches in torch."""
