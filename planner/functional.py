@@ -24,10 +24,15 @@ from models.grasp import Grasp
 from models.hands import HandModel, load_hand
 from models.objects import Instruction, ObjectModel, parse_instruction
 from models.objects.completion import complete_view
-from models.objects.intents import WRIST_CRITERIA, Definition, label_free
+from models.objects.intents import WRIST_CRITERIA, Definition, label_free, region_checked
 from models.reproducible import rounded
 from planner.grasp_program import GraspProgram, GraspTargets, SolveResult, grasp_program
-from planner.intent import check_configuration, faces_intent, intent_definition
+from planner.intent import (
+    check_configuration,
+    faces_intent,
+    intent_definition,
+    region_definition,
+)
 from planner.labels import grasp_part
 from planner.learned_proposer import (
     REGION_PART,
@@ -113,12 +118,11 @@ class FunctionalPlanner:
         build = time.perf_counter() - start
         proposals = self.propose(obj, part, meaning)
         propose_time = time.perf_counter() - start - build
-        shaped_program, table_top = program, None
+        shaped = None
         if meaning is not None and any(p.shaped for p in proposals):
-            shaped_program, table_top = self._intent_program(obj, meaning)
-            build = time.perf_counter() - start - propose_time
+            shaped = partial(self._intent_program, obj, meaning)
         times = {"build": build, "propose": propose_time}
-        programs = (program, shaped_program, table_top)
+        programs = (program, shaped)
         return self._run(obj, instruction, part, meaning is not None, proposals, programs, times)
 
     def proposer_for(self, obj: ObjectModel, instruction: Instruction | str) -> str:
@@ -168,6 +172,13 @@ class FunctionalPlanner:
                 *drawing, weights=s.learned.interaction_weights, steps=s.learned.sample_steps
             )
         drawn_time = time.perf_counter() - t0
+        # on a cloud without labels, Hold is measured with the region the samples point at as
+        # its part (models.objects.intents.region_checked)
+        region = None
+        if s.intent.aware and not known and region_checked(instruction.intent):
+            region = region_object(obj, drawn.anchors)
+            if region is not None:
+                checked, meaning = True, region_definition(region, instruction)
         proposals = []
         for i in range(len(drawn.wrists)):
             wrist, anchors = rounded(drawn.wrists[i]), rounded(drawn.anchors[i])
@@ -208,13 +219,18 @@ class FunctionalPlanner:
         # facing samples first, then best anchor closure; stable: sample order breaks ties
         proposals.sort(key=lambda p: (not p.shaped, -p.anchor_quality))
         # the region proposals come after the samples, made only if the search reaches them
+        # shaped by the intent where it is measured without the object's labels: Liftup's, or
+        # Hold's on the region (a labelled object's definitions name parts the region lacks)
+        shape = None
+        if meaning is not None and (label_free(meaning.intent) or region is not None):
+            shape = meaning
         later = None
         if s.learned.region_proposals > 0 and s.learned.solver == "drake" and not direct:
-            later = partial(self._region_proposals, obj, drawn.anchors, meaning)
-        region_shaped = later is not None and meaning is not None and label_free(meaning.intent)
-        shaped_program, table_top = program, None
+            later = partial(self._region_proposals, obj, drawn.anchors, shape)
+        region_shaped = later is not None and shape is not None
+        shaped = None
         if any(p.shaped for p in proposals) or region_shaped:
-            shaped_program, table_top = self._intent_program(obj, meaning)
+            shaped = partial(self._intent_program, obj, meaning)
         times = {"build": time.perf_counter() - start - drawn_time, **drawn.times}
         voter = None
         if part is None and s.learned.region_vote > 0 and not direct:
@@ -225,26 +241,26 @@ class FunctionalPlanner:
             part,
             checked,
             proposals,
-            (program, shaped_program, table_top),
+            (program, shaped),
             times,
             voter,
             later,
+            region,
         )
         result.understood = understood.to_dict()
         result.proposer = "direct" if direct else "learned"
         return result
 
     def _region_proposals(
-        self, obj: ObjectModel, anchors: np.ndarray, meaning: Definition | None
+        self, obj: ObjectModel, anchors: np.ndarray, shape: Definition | None
     ) -> list[Proposal]:
         """The model-based proposer's proposals on the region the samples point at
-        (planner.learned_proposer.region_object), best `learned.region_proposals` of them. They
-        are shaped by the intent only where its definition needs no labels (Liftup): the
-        others name parts the region object does not have."""
+        (planner.learned_proposer.region_object), best `learned.region_proposals` of them,
+        shaped by `shape` (Liftup's definition, or Hold's on the region,
+        planner.intent.region_definition; None: by the region alone)."""
         region = region_object(obj, anchors)
         if region is None:
             return []
-        shape = meaning if meaning is not None and label_free(meaning.intent) else None
         found = self.propose(region, REGION_PART, shape)
         return found[: self.settings.learned.region_proposals]
 
@@ -255,10 +271,11 @@ class FunctionalPlanner:
         part: str | None,
         check_intent: bool,
         proposals: list[Proposal],
-        programs: tuple[GraspProgram, GraspProgram, float | None],
+        programs: tuple[GraspProgram, Callable[[], tuple[GraspProgram, float | None]] | None],
         times: dict[str, float],
         voter: ObjectModel | None = None,
         later: Callable[[], list[Proposal]] | None = None,
+        intent_region: ObjectModel | None = None,
     ) -> PlanResult:
         """Solve, schedule and validate the proposals (planner.schedule). `programs`: the
         program, the one for proposals shaped by the intent, and that one's table top; `times`
@@ -266,17 +283,30 @@ class FunctionalPlanner:
         unless `voter` (the region the learned samples point at, `learned.region_vote`) says
         which held grasps count first; the candidates' `part` stays None. `later`: makes the
         proposals that follow these, if the search reaches them (planner.schedule `more`);
-        the time it takes goes to the last candidate solved before, as stage "region"."""
+        the time it takes goes to the last candidate solved before, as stage "region".
+        `intent_region`: the intent is checked with it standing in for the part
+        (planner.intent.check_configuration)."""
         notes = []
-        program, shaped_program, table_top = programs
+        program, make_shaped = programs
+        built: list[tuple[GraspProgram, float | None]] = []  # the shaped program, once made
+
+        def shaped() -> tuple[GraspProgram, float | None]:
+            if not built:
+                built.append((program, None) if make_shaped is None else make_shaped())
+            return built[0]
 
         def program_of(rank: int) -> GraspProgram:
-            return shaped_program if proposals[rank].shaped else program
+            return shaped()[0] if proposals[rank].shaped else program
 
         def solve(ranks: list[int]) -> list[CandidateResult]:
             """The proposals solved and scored, shared over `schedule.solve_processes`
-            (planner.parallel); D(R,O)'s targets and the intent checks (torch) run here."""
+            (planner.parallel); D(R,O)'s targets, the shaped program (built here, once, so
+            the children inherit it) and the intent checks (torch) run here."""
             made = {rank: self._prepare(proposals[rank]) for rank in ranks}
+            if not built and any(proposals[rank].shaped for rank in ranks):
+                t0 = time.perf_counter()
+                shaped()
+                made[ranks[0]]["build"] = time.perf_counter() - t0
             drake = all(self._drake_solve(proposals[rank]) for rank in ranks)
             count = processes(self.settings.schedule.solve_processes) if drake else 1
             solved = forked_map(solve_one, ranks, count)
@@ -284,7 +314,7 @@ class FunctionalPlanner:
 
         def solve_one(rank: int) -> CandidateResult:
             proposal = proposals[rank]
-            top = table_top if proposal.shaped else None
+            top = shaped()[1] if proposal.shaped else None
             return self._solve(program_of(rank), obj, rank, proposal, top)
 
         def more() -> int:
@@ -300,12 +330,18 @@ class FunctionalPlanner:
         def finish(cand: CandidateResult, made: dict[str, float]) -> CandidateResult:
             cand.times.update(made)
             finished.append(cand)
-            if cand.rank == 0:
-                cand.times.update(times)
+            if cand.rank == 0:  # building and proposing (a lazy build adds to it)
+                for stage, seconds in times.items():
+                    cand.times[stage] = cand.times.get(stage, 0.0) + seconds
             if check_intent and cand.solve.ok:
                 t0 = time.perf_counter()
                 cand.intent = check_configuration(
-                    cand.solve.wrist, cand.solve.q, obj, self.hand, instruction
+                    cand.solve.wrist,
+                    cand.solve.q,
+                    obj,
+                    self.hand,
+                    instruction,
+                    region=intent_region,
                 )
                 cand.times["intent"] = time.perf_counter() - t0
             return cand

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import weakref
 from collections.abc import Iterable
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 import torch
@@ -192,6 +192,16 @@ def _object_facts(obj: ObjectModel) -> _ObjectFacts:
     if obj not in _OBJECTS:
         _OBJECTS[obj] = _ObjectFacts(obj)
     return _OBJECTS[obj]
+
+
+def _region_facts(obj: ObjectModel, region: ObjectModel) -> _ObjectFacts:
+    """The region's points and labels with the object's own centre of mass and lowest point
+    (a region object is a bare cloud: its mean is not the mass centre of a mesh)."""
+    if region not in _OBJECTS:
+        facts, shape = _ObjectFacts(region), _object_facts(obj)
+        facts.com, facts.bottom = shape.com, shape.bottom
+        _OBJECTS[region] = facts
+    return _OBJECTS[region]
 
 
 def _hand_facts(hand: HandModel) -> _HandFacts:
@@ -493,6 +503,16 @@ def region_points(obj: ObjectModel, region: Region) -> np.ndarray:
     return _object_facts(obj).region(region)
 
 
+def region_definition(region: ObjectModel, instruction: Instruction | str) -> Definition:
+    """The definition of the instruction's intent with the region (an object whose first part
+    is the region the learned samples point at, planner.learned_proposer.region_object)
+    standing in for the instructed part: the generic criteria of the intent, no category's
+    elements (models.objects.intents.region_checked says which intents this measures)."""
+    ins = parse_instruction(instruction) if isinstance(instruction, str) else instruction
+    ins = replace(ins, part=region.part_names[0], category=None)
+    return intent_definition(region, ins)
+
+
 def check_configuration(
     wrist: np.ndarray,
     q: np.ndarray,
@@ -500,11 +520,17 @@ def check_configuration(
     hand: HandModel,
     instruction: Instruction | str,
     rules: Rules = RULES,
+    region: ObjectModel | None = None,
 ) -> IntentCheck:
     """`check_intent` on a bare configuration: wrist [x, y, z, qw, qx, qy, qz] and joints (for
-    solved candidates that were never validated)."""
-    d = intent_definition(obj, instruction)
-    of, hf = _object_facts(obj), _hand_facts(hand)
+    solved candidates that were never validated). `region`: on an object without labels, the
+    region object that stands in for the part (`region_definition`); the object's own centre
+    of mass and lowest point are kept."""
+    if region is None:
+        d, of = intent_definition(obj, instruction), _object_facts(obj)
+    else:
+        d, of = region_definition(region, instruction), _region_facts(obj, region)
+    hf = _hand_facts(hand)
     cfg = _configure(hand, hf, np.asarray(wrist, dtype=float), np.asarray(q, dtype=float))
     return _evaluate(d, of, hf, cfg, rules)
 
@@ -580,5 +606,6 @@ __all__ = [
     "faces_intent",
     "intent_definition",
     "mass_centre",
+    "region_definition",
     "region_points",
 ]

@@ -391,6 +391,42 @@ def test_liftup_is_checked_without_part_labels_the_others_are_refused(objects):
         check_configuration(*pose, bare, hand, "Hold a mug by body")
 
 
+def test_hold_is_measured_on_a_region_standing_in_for_the_part(objects):
+    """On a cloud without labels the learned samples' region stands in for the part: a region
+    that is exactly the mug's body measures Hold as the labelled mug does (the object's own
+    centre of mass kept). Only Hold is measured this way: Handover's other parts and Use's
+    elements need real labels, Liftup needs none."""
+    from dataclasses import replace
+
+    from models.objects import ObjectModel
+    from models.objects.intents import region_checked
+
+    assert region_checked("Hold")
+    assert not any(region_checked(i) for i in ("Use", "Handover", "Liftup"))
+    hand, mug = load_hand("allegro"), objects("mug")
+    bare = replace(mug, face_labels=None, cloud_labels=None, part_names=(), _derived={})
+    body = mug.point_labels == mug.part_names.index("body")
+    region = ObjectModel(
+        name="mug",
+        cloud=bare.points,
+        cloud_normals=bare.normals,
+        cloud_labels=np.where(body, 0, 1),
+        part_names=("pointed", "rest"),
+        category="mug",
+    )
+    pts = part_points(mug, "body")
+    for x, touching in ((pts[:, 0].min() - 0.003, True), (pts[:, 0].min() - 0.05, False)):
+        pose = placed(hand, [x, pts[:, 1].mean(), 0.0], X, Z)
+        labelled = check_configuration(*pose, mug, hand, "Hold a mug by body")
+        on_region = check_configuration(*pose, bare, hand, "Hold a mug by body", region=region)
+        assert on_region.intent == "Hold" and on_region.ok == labelled.ok
+        assert on_region["palm_contact"].passed == touching
+        assert [c.name for c in on_region.criteria] == [c.name for c in labelled.criteria]
+        assert [c.value for c in on_region.criteria] == pytest.approx(
+            [c.value for c in labelled.criteria]
+        )
+
+
 def test_faces_intent_reads_the_wrist_criteria_only(objects):
     from planner.intent import faces_intent
 

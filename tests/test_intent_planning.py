@@ -123,7 +123,7 @@ def _fake(monkeypatch, intent_ok, holds) -> None:
     monkeypatch.setattr(FunctionalPlanner, "_solve", fake_solve)
     monkeypatch.setattr(FunctionalPlanner, "_validate", fake_validate)
     monkeypatch.setattr(
-        functional, "check_configuration", lambda *args: _check(intent_ok(solving.pop(0)))
+        functional, "check_configuration", lambda *args, **kwargs: _check(intent_ok(solving.pop(0)))
     )
     monkeypatch.setattr(functional, "processes", lambda setting: 1)  # the fakes count here
 

@@ -18,7 +18,7 @@ from models.objects import load_object, make_object
 from planner import plan_grasp
 from planner.functional import FunctionalPlanner, PlannerSettings
 from planner.learned_proposer import pointed_region, sample_start
-from planner.settings import LearnedSettings, ScheduleSettings
+from planner.settings import IntentSettings, LearnedSettings, ScheduleSettings
 from tests.tiny_models import TINY_INTERACTION
 
 
@@ -224,6 +224,33 @@ def test_liftup_is_checked_on_a_bare_cloud_and_samples_facing_down_go_first(hand
             assert c.intent is not None and c.intent.intent == "Liftup"
             if c.proposal.shaped:  # solved above the table
                 assert c.intent["above_table"].value >= -1e-3
+
+
+@pytest.mark.slow
+def test_hold_is_checked_on_a_bare_cloud_with_the_pointed_region_as_its_part():
+    """Hold's palm contact needs a part: on a bare cloud the region the samples point at is
+    that part, so every solved candidate is checked (and the held ones meeting it preferred);
+    with intent awareness off nothing is checked."""
+    cloud = load_object(make_object("mug", 3).sample_cloud(4096).points)
+
+    def planned(aware: bool):
+        settings = PlannerSettings(
+            schedule=ScheduleSettings(max_candidates=1),
+            learned=LearnedSettings(samples=8),
+            intent=IntentSettings(aware=aware),
+        )
+        planner = FunctionalPlanner("allegro", settings)
+        planner._validate = lambda program, obj, instruction, cand: None  # solves only
+        return planner.plan(cloud, "Hold a mug by body")
+
+    result = planned(True)
+    assert result.instruction.intent == "Hold"
+    solved = [c for c in result.candidates if c.solve.ok]
+    assert solved
+    for c in solved:
+        assert c.intent is not None and c.intent.intent == "Hold"
+        assert [x.name for x in c.intent.criteria] == ["palm_contact", "force_closure"]
+    assert all(c.intent is None for c in planned(False).candidates)
 
 
 @pytest.mark.slow

@@ -123,9 +123,25 @@ LABEL_FREE_CRITERIA: frozenset[str] = frozenset(
 WRIST_CRITERIA: frozenset[str] = frozenset({"wrist_above_com", "palm_down"})
 
 
+# Criteria measured on a part's own points alone (how wide it is, how near the palm is to it):
+# on a cloud without labels the region the learned samples point at stands in for the part
+# (planner.learned_proposer.region_object). Criteria about the other parts (Handover's
+# clearance from them, the receiver's side) or a named element (Use) need the real labels: a
+# region is a patch of its part, the rest of which would count as "another part".
+REGION_CRITERIA: frozenset[str] = frozenset({"palm_contact"})
+
+
 def label_free(intent: str) -> bool:
     """Whether every criterion of the intent can be measured without part labels."""
     return set(CRITERIA[intent]) <= LABEL_FREE_CRITERIA
+
+
+def region_checked(intent: str) -> bool:
+    """Whether, on a cloud without labels, the intent is measured with the pointed region as
+    its part (Hold: the palm on the region, force closure); not intents measured without any
+    part (label_free)."""
+    criteria = set(CRITERIA[intent])
+    return not label_free(intent) and criteria <= LABEL_FREE_CRITERIA | REGION_CRITERIA
 
 
 # ---- per category: functional elements, working parts, the receiver's parts ----------------
