@@ -134,3 +134,38 @@ def test_the_plan_time_benchmark_plans_each_pair_both_ways(tmp_path):
     row = out.strip().splitlines()[-1].split()
     assert row[0] == "allegro" and row[1] == "1" and row[-1] == "1/1"  # the same candidates
     assert float(row[2]) > 0 and float(row[3]) > 0
+
+
+def test_the_forked_solves_run_no_torch(monkeypatch):
+    """torch in a child forked after the parent used its threads hangs (a plan then waits
+    CHILD_TIMEOUT): in the children every way into torch from numpy raises, and a learned
+    plan whose D(R,O) targets are pooled per link (planner.point_costs) still solves there."""
+    import torch
+
+    child = parallel._child
+
+    def guarded_child(fn, items, write):
+        def refuse(*args, **kwargs):
+            raise AssertionError("torch called in a forked solve process")
+
+        for name in ("from_numpy", "as_tensor", "tensor", "zeros", "ones", "empty"):
+            setattr(torch, name, refuse)
+
+        def solve_and_mark(x):
+            out = fn(x)
+            out.times["in_child"] = 1.0
+            return out
+
+        child(solve_and_mark, items, write)
+
+    monkeypatch.setattr(parallel, "_child", guarded_child)
+    settings = PlannerSettings(
+        proposer="learned",
+        schedule=ScheduleSettings(max_candidates=1, solve_processes=2),
+        learned=LearnedSettings(samples=4),
+    )
+    result = FunctionalPlanner("allegro", settings).plan(
+        make_object("mug", 4), "Hold a mug by body"
+    )
+    solved_in_child = [c for c in result.candidates if c.times.get("in_child")]
+    assert solved_in_child and all(c.proposal.point_targets is not None for c in solved_in_child)
