@@ -290,8 +290,12 @@ def test_demo_lists_every_hand(tmp_path):
     assert hold["hand"] == "allegro" and "intent_ok" in hold["metrics"]
     # the learned stages on unlabelled clouds and free sentences, read in the table's terms
     assert "learned stages" in run.stdout and "grab the mug by its handle" in run.stdout
-    assert "Hold a bottle by body" in run.stdout.split("learned stages")[1]
-    assert "Learned stages: unlabelled clouds" in index
+    learned = run.stdout.split("learned stages")[1]
+    assert "Hold a bottle by body" in learned and "intent met" in learned
+    rows = {line.split()[1]: line.split() for line in learned.splitlines()[3:] if line.strip()}
+    assert rows["hold"][-2] in ("yes", "no")  # Hold: checked on the samples' region
+    assert rows["hand"][-2] == "-"  # Handover needs the parts: not checked on a cloud
+    assert "Learned stages: unlabelled clouds" in index and "meets its intent" in index
 
 
 def test_task_quality_needs_closure_and_falls_with_a_far_centre_of_mass():

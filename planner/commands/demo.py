@@ -102,7 +102,9 @@ def run(args: argparse.Namespace) -> int:
 
 def _learned(hands: list[str], out) -> list[tuple]:
     """Free-form sentences on unlabelled clouds, planned on the learned stages' proposals:
-    rows of (hand, sentence, read as, holds, time s, page)."""
+    rows of (hand, sentence, read as, holds, intent met, time s, page). The intent is checked
+    where it can be without labels (Liftup; Hold on the region the samples point at), else
+    "-"."""
     from models.hands import load_hand
     from models.objects import load_object, make_object
     from planner.functional import FunctionalPlanner, PlannerSettings
@@ -114,7 +116,10 @@ def _learned(hands: list[str], out) -> list[tuple]:
         "clouds (no part labels)",
         flush=True,
     )
-    header = f"{'hand':<8} {'sentence':<34} {'read as':<28} {'success':<8} {'time s':>7}"
+    header = (
+        f"{'hand':<8} {'sentence':<34} {'read as':<28} {'success':<8} {'intent met':<10} "
+        f"{'time s':>7}"
+    )
     print(header)
     print("-" * len(header))
     rows = []
@@ -134,10 +139,11 @@ def _learned(hands: list[str], out) -> list[tuple]:
                 result.grasp.save(out / f"{stem}.json")
                 text = f'"{sentence}" (read as: {read}) · learned · {caption(result.grasp)}'
                 page = write_html(result.grasp, cloud, hand, out / f"{stem}.html", text).name
-            rows.append((hand_name, sentence, read, result.success, elapsed, page))
+            intent = _yes_no(result.intent_ok)
+            rows.append((hand_name, sentence, read, result.success, intent, elapsed, page))
             print(
                 f"{hand_name:<8} {sentence:<34} {read:<28} "
-                f"{'yes' if result.success else 'no':<8} {elapsed:>7.2f}",
+                f"{'yes' if result.success else 'no':<8} {intent:<10} {elapsed:>7.2f}",
                 flush=True,
             )
     return rows
@@ -156,9 +162,9 @@ def _index_page(rows, learned_rows=()) -> str:
     )
     learned = "".join(
         f"<tr><td>{html.escape(h)}</td><td>{html.escape(t)}</td><td>{html.escape(read)}</td>"
-        f"<td>{'yes' if ok else 'no'}</td><td>{s:.2f}</td>"
+        f"<td>{'yes' if ok else 'no'}</td><td>{i}</td><td>{s:.2f}</td>"
         f"<td>{f'<a href={page!r}>view</a>' if page else '-'}</td></tr>"
-        for h, t, read, ok, s, page in learned_rows
+        for h, t, read, ok, i, s, page in learned_rows
     )
     pages = {(r[0], r[1]): r[6] for r in rows}
     pairs = ""
@@ -181,6 +187,7 @@ def _index_page(rows, learned_rows=()) -> str:
         "<th>part touched</th><th>meets its intent</th><th>time (s)</th><th>grasp</th></tr>"
         f"{body}</table><h2>One part, two intents</h2><table>{pairs}</table>"
         "<h2>Learned stages: unlabelled clouds, free-form sentences</h2><table><tr><th>hand"
-        "</th><th>sentence</th><th>read as</th><th>holds</th><th>time (s)</th><th>grasp</th>"
+        "</th><th>sentence</th><th>read as</th><th>holds</th><th>meets its intent</th>"
+        "<th>time (s)</th><th>grasp</th>"
         f"</tr>{learned}</table>"
     )
