@@ -278,7 +278,8 @@ class FunctionalPlanner:
         intent_region: ObjectModel | None = None,
     ) -> PlanResult:
         """Solve, schedule and validate the proposals (planner.schedule). `programs`: the
-        program, the one for proposals shaped by the intent, and that one's table top; `times`
+        program, and what makes the program for proposals shaped by the intent with its table
+        top (None: no proposal is shaped), called when a shaped proposal is first solved; `times`
         (building and proposing) go to the first candidate. `part` None: any part counts,
         unless `voter` (the region the learned samples point at, `learned.region_vote`) says
         which held grasps count first; the candidates' `part` stays None. `later`: makes the
