@@ -136,6 +136,7 @@ def test_the_plan_time_benchmark_plans_each_pair_both_ways(tmp_path):
     assert float(row[2]) > 0 and float(row[3]) > 0
 
 
+@pytest.mark.slow  # a learned plan, about 10 s: the default run is near its 5 minutes
 def test_the_forked_solves_run_no_torch(monkeypatch):
     """torch in a child forked after the parent used its threads hangs (a plan then waits
     CHILD_TIMEOUT): in the children every way into torch from numpy raises, and a learned
