@@ -38,6 +38,16 @@ def _record(result, part: str) -> PairRecord:
     )
 
 
+# every hand; LEAP and Shadow (9-12 s each) with the slow tests, to keep the default run in
+# its 5 minutes
+@pytest.mark.parametrize(
+    "hand_name",
+    [
+        "allegro",
+        pytest.param("leap", marks=pytest.mark.slow),
+        pytest.param("shadow", marks=pytest.mark.slow),
+    ],
+)
 def test_replay_of_all_validated_records_is_the_plan(hand_name, tmp_path):
     # a small policy whose sweep after 2 failed validations is reached on this handle (here: by
     # every hand, which then solves all 8 proposals; no candidate waits for the gate)
