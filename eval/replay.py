@@ -18,9 +18,10 @@ policy sees only what the method saw (a learned plan has no part labels):
 
     python -m eval.replay runs/bl_all3/records.jsonl --method learned --set schedule.gate_solves=24
 
-`--retry DEEPER.jsonl` (records of the same pairs made with a deeper squeeze,
-`--set program.squeeze_depth=D program.retry_squeeze_depth=0`) replays a squeeze retry at that
-depth: a candidate that slips in RECORDS holds if it holds in DEEPER, as `finish_grasp` decides.
+`--retry OTHER.jsonl [...]` (records of the same pairs made with another squeeze,
+`--set program.squeeze_depth=D program.retry_squeeze_depths=[]`) replays squeeze retries at
+those depths in turn: a candidate that slips in RECORDS holds if it holds in one of them, as
+`finish_grasp` decides.
 """
 
 from __future__ import annotations
@@ -147,10 +148,10 @@ def _benchmark_pair(r: dict) -> PairRecord:
 
 
 def with_retry(records: list[PairRecord], deeper: list[PairRecord]) -> list[PairRecord]:
-    """`records` as a squeeze retry at the depth of `deeper` would have made them: a candidate
-    that slipped holds where it held in `deeper` (its voted part depends on the grasp, not on the
-    squeeze), and the retry's validation time is added. The two must hold the same pairs and
-    the same solves: only the squeeze may differ."""
+    """`records` as a squeeze retry at the depth of `deeper` (deeper or shallower) would have
+    made them: a candidate that slipped holds where it held in `deeper` (its voted part depends
+    on the grasp, not on the squeeze), and the retry's validation time is added. The two must
+    hold the same pairs and the same solves: only the squeeze may differ."""
     if len(records) != len(deeper):
         raise RecordsError(f"{len(records)} records but {len(deeper)} with the deeper squeeze")
     merged = []
@@ -173,7 +174,8 @@ def with_retry(records: list[PairRecord], deeper: list[PairRecord]) -> list[Pair
                 )
             c = dict(c)
             if c["solved"] and not c["success"] and d["validated_as"] is not None:
-                c["times"] = c["times"] | {"retry": d["times"].get("validate", 0.0)}
+                retry = c["times"].get("retry", 0.0) + d["times"].get("validate", 0.0)
+                c["times"] = c["times"] | {"retry": retry}
                 c["success"] = bool(d["success"])
             summaries.append(c)
         merged.append(replace(rec, candidate_summaries=summaries))
@@ -368,8 +370,9 @@ def main() -> None:
     parser.add_argument(
         "--retry",
         type=Path,
-        metavar="DEEPER",
-        help="records of the same pairs with a deeper squeeze: replay a squeeze retry",
+        nargs="+",
+        metavar="OTHER",
+        help="records of the same pairs with other squeezes: replay squeeze retries in turn",
     )
     args = parser.parse_args()
     for item in args.set:
@@ -391,15 +394,15 @@ def main() -> None:
             raise RecordsError("--method chooses among eval.benchmark records' methods")
         else:
             records = load_records(args.records)
-        if args.retry is not None:
-            records = with_retry(records, load_records(args.retry))
+        for other in args.retry or ():
+            records = with_retry(records, load_records(other))
         replayed = [replay_pair(r, settings, labelled, ordered) for r in records]
     except RecordsError as err:
         raise SystemExit(f"error: {err}") from None
     print(
         f"{len(records)} recorded pairs replayed, up to {args.candidates} validations"
         + (f", settings {' '.join(args.set)}" if args.set else "")
-        + (f", slips retried as in {args.retry}" if args.retry else "")
+        + (f", slips retried as in {', '.join(map(str, args.retry))}" if args.retry else "")
     )
     if ordered:
         print_benchmark_table(replayed, args.candidates)

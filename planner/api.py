@@ -54,7 +54,6 @@ _RANGES: dict[str, dict[str, tuple[float | None, float | None]]] = {
         "anchor_tolerance": (0.0, None),
         "influence_distance": (0.0, None),
         "squeeze_depth": (0.0, None),
-        "retry_squeeze_depth": (0.0, None),
         "pregrasp_clearance": (0.0, None),
     },
 }

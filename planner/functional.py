@@ -501,9 +501,9 @@ def finish_grasp(
     """Pregrasp (anchor fingertips about 1 cm off the surface, offsets set by balanced squeeze
     forces and shrunk where a link, or the closing's path, would be inside the object:
     GraspProgram.closing), BODex squeeze (as deep as the unshrunk offsets), the Grasp record, MuJoCo validation and the voted part: every planned or
-    transferred grasp goes through these same steps. A grasp that slips is validated once more
-    with the deeper squeeze of `program.retry_squeeze_depth`, where the hand has one, and the
-    squeeze that held is the one recorded (`metrics["squeeze_depth"]`)."""
+    transferred grasp goes through these same steps. A grasp that slips is validated again with
+    each squeeze depth of `program.retry_squeeze_depths` in turn, where the hand has them, up to
+    the first that holds; the squeeze that held is the one recorded (`metrics["squeeze_depth"]`)."""
     t1 = time.perf_counter()
     hand = program.hand
     wrist_t = torch.tensor(solved.wrist[None])
@@ -527,14 +527,14 @@ def finish_grasp(
     result = validate(grasp, pieces, hand, protocol)
     depth = program.squeeze_depth
     times = {"pregrasp": t2 - t1, "validate": time.perf_counter() - t2}
-    retry = program.retry_squeeze_depth
-    if not result.success and retry is not None:
+    for retry in program.retry_squeeze_depths if not result.success else ():
         t3 = time.perf_counter()
-        deeper = replace(grasp, squeeze=program.squeeze(solved.q, pre, retry, scale), metrics={})
-        again = validate(deeper, pieces, hand, protocol)
-        times["retry"] = time.perf_counter() - t3
+        other = replace(grasp, squeeze=program.squeeze(solved.q, pre, retry, scale), metrics={})
+        again = validate(other, pieces, hand, protocol)
+        times["retry"] = times.get("retry", 0.0) + time.perf_counter() - t3
         if again.success:
-            grasp, result, depth = deeper, again, retry
+            grasp, result, depth = other, again, retry
+            break
     part = grasp_part(hand, solved.wrist, solved.q, obj)  # None: an unlabelled object
     validation = result.to_dict()
     grasp.metrics.update(

@@ -98,12 +98,24 @@ class ProgramSettings:
     # before contact, and with the depth the squeeze offset past it; None: the hand's hand.json
     # `pregrasp_clearance` (default 1 cm)
     pregrasp_clearance: float | None = None
-    # a deeper squeeze validated when a grasp slips at `squeeze_depth` (finish_grasp); None:
-    # the hand's hand.json `retry_squeeze_depth` (default none); 0, or any depth not deeper
-    # than the squeeze: no retry
-    retry_squeeze_depth: float | None = None
+    # other squeeze depths validated in turn when a grasp slips at `squeeze_depth`
+    # (finish_grasp); None: the hand's hand.json `retry_squeeze_depths` (default none); ():
+    # no retry. A depth equal to the squeeze's is skipped (the same verdict again)
+    retry_squeeze_depths: tuple[float, ...] | None = None
 
     def __post_init__(self) -> None:
+        retry = self.retry_squeeze_depths
+        if retry is not None and not (
+            isinstance(retry, tuple)
+            and all(
+                isinstance(d, int | float) and not isinstance(d, bool) and 0 < d < np.inf
+                for d in retry
+            )
+        ):
+            raise PlanningError(
+                "retry_squeeze_depths must be a tuple of positive numbers like (0.5, 2.0), () "
+                f"for no retry, or None for the hand's own; got {retry!r}"
+            )
         if self.pregrasp_rule not in PREGRASP_RULES:
             raise PlanningError(
                 f"unknown pregrasp_rule {self.pregrasp_rule!r}; use one of {PREGRASP_RULES}"
@@ -236,14 +248,14 @@ class GraspProgram:
         return self.hand.meta.squeeze_depth if depth is None else depth
 
     @property
-    def retry_squeeze_depth(self) -> float | None:
-        """The deeper squeeze tried after a slip: the settings', else the hand's; none where
-        that is not deeper than the squeeze (0 in the settings, or a squeeze depth set as deep),
-        since validating the same squeeze again gives the same verdict."""
-        depth = self.settings.retry_squeeze_depth
-        if depth is None:
-            depth = self.hand.meta.retry_squeeze_depth
-        return depth if depth is not None and depth > self.squeeze_depth else None
+    def retry_squeeze_depths(self) -> tuple[float, ...]:
+        """The squeezes tried in turn after a slip: the settings', else the hand's, less the
+        squeeze's own depth and repeats (validating the same squeeze again gives the same
+        verdict)."""
+        depths = self.settings.retry_squeeze_depths
+        if depths is None:
+            depths = self.hand.meta.retry_squeeze_depths
+        return tuple(dict.fromkeys(float(d) for d in depths if d != self.squeeze_depth))
 
     @property
     def pregrasp_clearance(self) -> float:

@@ -1011,7 +1011,7 @@ def _hand_variants(meta: dict, urdf: str) -> list[tuple[str, str, Any, Any]]:
             ),
         ),
         ("pregrasp_clearance NaN", with_meta(pregrasp_clearance=nan)),
-        ("retry_squeeze_depth text", with_meta(retry_squeeze_depth="3")),
+        ("retry_squeeze_depths text", with_meta(retry_squeeze_depths="3")),
         ("pinch_proposals 2.5", with_meta(pinch_proposals=2.5)),
         ("learned_start_closure -0.1", with_meta(learned_start_closure=-0.1)),
     ]

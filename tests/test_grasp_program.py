@@ -298,14 +298,18 @@ def test_settings_override_the_hands_closing(hand_name):
     settings = ProgramSettings(squeeze_depth=3.0, pregrasp_clearance=0.002)
     given = grasp_program(hand, obj.collision_pieces(), settings)
     assert (given.squeeze_depth, given.pregrasp_clearance) == (3.0, 0.002)
-    assert own.retry_squeeze_depth == hand.meta.retry_squeeze_depth
-    retry = grasp_program(hand, obj.collision_pieces(), ProgramSettings(retry_squeeze_depth=5.0))
-    assert retry.retry_squeeze_depth == 5.0
-    none = grasp_program(hand, obj.collision_pieces(), ProgramSettings(retry_squeeze_depth=0))
-    assert none.retry_squeeze_depth is None
-    # a squeeze set as deep as the hand's retry leaves nothing deeper to retry with
-    deep = ProgramSettings(squeeze_depth=hand.meta.retry_squeeze_depth or 9.0)
-    assert grasp_program(hand, obj.collision_pieces(), deep).retry_squeeze_depth is None
+    assert own.retry_squeeze_depths == hand.meta.retry_squeeze_depths
+    retry = ProgramSettings(retry_squeeze_depths=(5.0, 0.5, 5.0))
+    assert grasp_program(hand, obj.collision_pieces(), retry).retry_squeeze_depths == (5.0, 0.5)
+    none = grasp_program(hand, obj.collision_pieces(), ProgramSettings(retry_squeeze_depths=()))
+    assert none.retry_squeeze_depths == ()
+    # a squeeze set to one of the hand's retry depths is not retried at that depth again
+    for depth in hand.meta.retry_squeeze_depths:
+        same = grasp_program(hand, obj.collision_pieces(), ProgramSettings(squeeze_depth=depth))
+        assert depth not in same.retry_squeeze_depths
+    for bad in (0.5, (0.0,), (float("nan"),), (True,), ("1",)):
+        with pytest.raises(PlanningError, match="retry_squeeze_depths must be a tuple"):
+            ProgramSettings(retry_squeeze_depths=bad)
 
 
 def test_a_row_of_nan_anchors_leaves_that_finger_free(hand_name):
@@ -353,29 +357,31 @@ def test_a_slipping_grasp_is_validated_again_with_the_deeper_squeeze(hand_name, 
     targets = GraspTargets(proposal.wrist, proposal.q, proposal.anchors, proposal.normals)
     squeezes: list[np.ndarray] = []
 
-    def fake_validate(grasp, *args):  # holds only with the deeper squeeze
+    def fake_validate(grasp, *args):  # holds only with the third squeeze
         squeezes.append(grasp.squeeze)
-        return _Verdict(len(squeezes) == 2)
+        return _Verdict(len(squeezes) == 3)
 
     monkeypatch.setattr(functional, "validate", fake_validate)
-    program = grasp_program(hand, obj.collision_pieces(), ProgramSettings(retry_squeeze_depth=3.0))
+    settings = ProgramSettings(retry_squeeze_depths=(3.0, 0.5, 4.0))
+    program = grasp_program(hand, obj.collision_pieces(), settings)
     solved = program.solve(targets)
     done = functional.finish_grasp(program, obj, solved, "Hold a bottle by body", "paper")
     pre = done.grasp.pregrasp
-    first, deeper = program.squeeze(solved.q, pre), program.squeeze(solved.q, pre, 3.0)
-    assert not np.allclose(first, deeper)
-    assert np.array_equal(squeezes[0], first) and np.array_equal(squeezes[1], deeper)
-    assert done.success and np.array_equal(done.grasp.squeeze, deeper)
-    assert done.grasp.metrics["squeeze_depth"] == 3.0 and "retry" in done.times
+    tried = [program.squeeze(solved.q, pre, d) for d in (program.squeeze_depth, 3.0, 0.5)]
+    assert not np.allclose(tried[0], tried[1]) and not np.allclose(tried[0], tried[2])
+    assert len(squeezes) == 3  # the one that held ends the retries: 4.0 is never validated
+    assert all(np.array_equal(a, b) for a, b in zip(squeezes, tried, strict=True))
+    assert done.success and np.array_equal(done.grasp.squeeze, tried[2])
+    assert done.grasp.metrics["squeeze_depth"] == 0.5 and "retry" in done.times
 
     squeezes.clear()
     monkeypatch.setattr(functional, "validate", lambda g, *a: squeezes.append(g) or _Verdict(False))
     done = functional.finish_grasp(program, obj, solved, "Hold a bottle by body", "paper")
-    assert len(squeezes) == 2 and not done.success  # both slip: the first squeeze is kept
-    assert np.array_equal(done.grasp.squeeze, first)
+    assert len(squeezes) == 4 and not done.success  # all slip: the first squeeze is kept
+    assert np.array_equal(done.grasp.squeeze, tried[0])
     assert done.grasp.metrics["squeeze_depth"] == program.squeeze_depth
 
     squeezes.clear()
-    once = grasp_program(hand, obj.collision_pieces(), ProgramSettings(retry_squeeze_depth=0))
+    once = grasp_program(hand, obj.collision_pieces(), ProgramSettings(retry_squeeze_depths=()))
     done = functional.finish_grasp(once, obj, once.solve(targets), "Hold a bottle", "paper")
     assert len(squeezes) == 1 and "retry" not in done.times

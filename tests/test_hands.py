@@ -279,9 +279,9 @@ def test_cli_hands_json():
     assert all(len(h["anchor_fingers"]) == 4 for h in hands.values())
     for name, h in hands.items():  # the closing the planner validates with, from hand.json
         meta = load_hand(name).meta
-        assert (h["squeeze_depth"], h["retry_squeeze_depth"], h["pinch_proposals"]) == (
+        assert (h["squeeze_depth"], h["retry_squeeze_depths"], h["pinch_proposals"]) == (
             meta.squeeze_depth,
-            meta.retry_squeeze_depth,
+            list(meta.retry_squeeze_depths),
             meta.pinch_proposals,
         )
 
@@ -355,22 +355,26 @@ def test_user_hand_pinch_proposals_must_be_a_count(tmp_path):
     assert load_hand(folder).meta.pinch_proposals == 3
 
 
-def test_user_hand_retry_squeeze_depth_must_be_deeper(tmp_path):
-    """A retry squeeze is optional (none where hand.json is silent) and deeper than the first."""
+def test_user_hand_retry_squeeze_depths(tmp_path):
+    """Retry squeezes are optional (none where hand.json is silent), distinct, positive and
+    other than the first squeeze; the old single `retry_squeeze_depth` is refused by name."""
     meta = json.loads((load_hand("allegro").folder / "hand.json").read_text())
-    meta.pop("retry_squeeze_depth", None)
+    meta.pop("retry_squeeze_depths", None)
     silent = tmp_path / "silent"
     shutil.copytree(load_hand("allegro").folder, silent)
     (silent / "hand.json").write_text(json.dumps(meta))
-    assert load_hand(silent).meta.retry_squeeze_depth is None
+    assert load_hand(silent).meta.retry_squeeze_depths == ()
     folder = tmp_path / "retry"
     shutil.copytree(load_hand("allegro").folder, folder)
-    for bad in (meta["squeeze_depth"], 0.5, "3", True):
-        (folder / "hand.json").write_text(json.dumps({**meta, "retry_squeeze_depth": bad}))
-        with pytest.raises(HandError, match="retry_squeeze_depth must be null or a number above"):
+    for bad in ([meta["squeeze_depth"]], [0.5, 0.5], [0], 3, ["3"], [True], None):
+        (folder / "hand.json").write_text(json.dumps({**meta, "retry_squeeze_depths": bad}))
+        with pytest.raises(HandError, match="retry_squeeze_depths must be a list of distinct"):
             load_hand(folder)
     (folder / "hand.json").write_text(json.dumps({**meta, "retry_squeeze_depth": 5}))
-    assert load_hand(folder).meta.retry_squeeze_depth == 5.0
+    with pytest.raises(HandError, match="did you mean 'retry_squeeze_depths'"):
+        load_hand(folder)
+    (folder / "hand.json").write_text(json.dumps({**meta, "retry_squeeze_depths": [5, 1]}))
+    assert load_hand(folder).meta.retry_squeeze_depths == (5.0, 1.0)
 
 
 # ---- fixed joints: links rigidly attached to their parent (fingertip bodies, mounting links)

@@ -143,6 +143,13 @@ def test_a_squeeze_retry_holds_where_the_deeper_squeeze_held():
     assert [("retry" in c["times"]) for c in merged.candidate_summaries] == [True, True, False]
     assert replay_pair(merged, settings).first_part_ok
     assert base.candidate_summaries[0]["success"] is False  # the records themselves unchanged
+    # a second retry (another depth) judges what still slips, and its validation adds up
+    shallow = replace(
+        base, candidate_summaries=[_summary(0, False), _summary(1, True), _summary(2, False)]
+    )
+    (twice,) = with_retry([merged], [shallow])
+    assert [c["success"] for c in twice.candidate_summaries] == [True, True, True]
+    assert [c["times"].get("retry") for c in twice.candidate_summaries] == [0.5, 1.0, None]
 
     solved_otherwise = replace(deeper, candidate_summaries=[_summary(0, True, task=0.9)])
     with pytest.raises(RecordsError, match="solved differently"):

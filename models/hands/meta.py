@@ -99,12 +99,12 @@ class HandMeta:
     # closing").
     pregrasp_clearance: float
     squeeze_depth: float
-    # A second, deeper squeeze validated when a grasp slips at `squeeze_depth` (None: none).
-    # The built-in hands retry at twice their depth, a squeeze target 2 cm past the contact: on
-    # all-validated records it held parts far from the centre of mass (pump heads, mug handles)
-    # that turn in the fingers at the first squeeze, and lost no pair, where the deeper squeeze
-    # for every grasp loses others (docs/planner_log.md, "Squeeze retry").
-    retry_squeeze_depth: float | None
+    # Other squeeze depths validated in turn when a grasp slips at `squeeze_depth` (empty:
+    # none). A deeper squeeze holds parts far from the centre of mass (pump heads, mug handles)
+    # that turn in the fingers at the first squeeze; a shallower one holds thin handles that the
+    # squeeze itself turns. Either for every grasp loses others; as retries they lose no pair
+    # (docs/planner_log.md, "Squeeze retry", "A shallower squeeze retried").
+    retry_squeeze_depths: tuple[float, ...]
     # Where the grasp program starts the fingers of a learned sample: the open pose closed this
     # fraction of each joint's range along its closing direction (HandModel.closed_pose; the
     # model-based proposals start at 0.35). From the open pose at a power grasp's wrist the hand
@@ -133,7 +133,7 @@ OPTIONAL_FIELDS = (
     "pinch_proposals",
     "pregrasp_clearance",
     "squeeze_depth",
-    "retry_squeeze_depth",
+    "retry_squeeze_depths",
     "learned_start_closure",
     "couplings",
     "joint_dynamics",
@@ -171,6 +171,19 @@ def _kind(value) -> str:
 def _finite_number(value) -> bool:
     """A JSON number (not a boolean, which Python counts as an int) that is finite."""
     return isinstance(value, (int, float)) and not isinstance(value, bool) and np.isfinite(value)
+
+
+def _retry_depths(value, squeeze_depth: float, path: Path) -> tuple[float, ...]:
+    """retry_squeeze_depths: distinct positive numbers, none the squeeze depth itself (the same
+    squeeze validated again gives the same verdict)."""
+    ok = isinstance(value, list) and all(_finite_number(v) and v > 0 for v in value)
+    if not ok or len(set(value)) < len(value) or squeeze_depth in value:
+        raise HandError(
+            f"{path}: retry_squeeze_depths must be a list of distinct positive numbers other "
+            f"than squeeze_depth ({squeeze_depth:g}), like [0.5, 2.0] (or [] for no retry), "
+            f"got {_show(value)}"
+        )
+    return tuple(float(v) for v in value)
 
 
 def _vec(value, field: str, path: Path) -> np.ndarray:
@@ -379,14 +392,9 @@ def read_meta(path: Path) -> HandMeta:
         if not _finite_number(value) or value <= 0:
             raise HandError(f"{path}: {field} must be a positive number, got {value!r}")
         closing_motion[field] = float(value)
-    retry = raw.get("retry_squeeze_depth")
-    if retry is not None:
-        if not _finite_number(retry) or retry <= closing_motion["squeeze_depth"]:
-            raise HandError(
-                f"{path}: retry_squeeze_depth must be null or a number above squeeze_depth "
-                f"({closing_motion['squeeze_depth']}), got {retry!r}"
-            )
-        retry = float(retry)
+    retry = _retry_depths(
+        raw.get("retry_squeeze_depths", []), closing_motion["squeeze_depth"], path
+    )
     start = raw.get("learned_start_closure", 0.0)
     if not _finite_number(start) or not 0 <= start < 1:
         raise HandError(
@@ -416,7 +424,7 @@ def read_meta(path: Path) -> HandMeta:
         palm_on_thin_parts=thin,
         pinch_proposals=pinches,
         **closing_motion,
-        retry_squeeze_depth=retry,
+        retry_squeeze_depths=retry,
         learned_start_closure=float(start),
         source=source,
         couplings=couplings,

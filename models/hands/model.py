@@ -439,7 +439,7 @@ class HandModel:
             # how the planner closes this hand in validation, and its extra proposals
             "pregrasp_clearance": self.meta.pregrasp_clearance,
             "squeeze_depth": self.meta.squeeze_depth,
-            "retry_squeeze_depth": self.meta.retry_squeeze_depth,
+            "retry_squeeze_depths": list(self.meta.retry_squeeze_depths),
             "pinch_proposals": self.meta.pinch_proposals,
             "source": self.meta.source,
             "folder": str(self.folder),

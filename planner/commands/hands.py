@@ -32,11 +32,11 @@ def run(args: argparse.Namespace) -> int:
         tips = ", ".join(f"{t['name']} ({t['link']})" for t in h["fingertips"])
         print(f"  fingertips:  {tips}")
         print(f"  anchors:     {', '.join(h['anchor_fingers'])}  (K = {len(h['anchor_fingers'])})")
-        retry = h["retry_squeeze_depth"]
+        retry = ", ".join(f"{d:g}" for d in h["retry_squeeze_depths"])
         print(
             f"  closing:     pregrasp {1000 * h['pregrasp_clearance']:g} mm off, squeeze depth "
             f"{h['squeeze_depth']:g}"
-            + ("" if retry is None else f", retried at {retry:g} after a slip")
+            + (f", retried at {retry} in turn after a slip" if retry else "")
         )
         print(f"  proposals:   {h['pinch_proposals']} pinch proposals after the regular ones")
         print(
