@@ -502,8 +502,9 @@ def finish_grasp(
     forces and shrunk where a link, or the closing's path, would be inside the object:
     GraspProgram.closing), BODex squeeze (as deep as the unshrunk offsets), the Grasp record, MuJoCo validation and the voted part: every planned or
     transferred grasp goes through these same steps. A grasp that slips is validated again with
-    each squeeze depth of `program.retry_squeeze_depths` in turn, where the hand has them, up to
-    the first that holds; the squeeze that held is the one recorded (`metrics["squeeze_depth"]`)."""
+    each closing of `program.retry_closings()` in turn (other squeeze depths, then another
+    pregrasp rule), up to the first that holds; the pregrasp and squeeze that held are the ones
+    recorded (`metrics["squeeze_depth"]`, `metrics["pregrasp_rule"]`)."""
     t1 = time.perf_counter()
     hand = program.hand
     wrist_t = torch.tensor(solved.wrist[None])
@@ -527,13 +528,19 @@ def finish_grasp(
     result = validate(grasp, pieces, hand, protocol)
     depth = program.squeeze_depth
     times = {"pregrasp": t2 - t1, "validate": time.perf_counter() - t2}
-    for retry in program.retry_squeeze_depths if not result.success else ():
+    rule = program.settings.pregrasp_rule
+    for retry, retry_rule in program.retry_closings() if not result.success else ():
         t3 = time.perf_counter()
-        other = replace(grasp, squeeze=program.squeeze(solved.q, pre, retry, scale), metrics={})
+        pre2, scale2 = pre, scale
+        if retry_rule != rule:  # another pregrasp, and the squeeze from it
+            normals = obj.normals[nearest]
+            pre2, scale2 = program.closing(solved.wrist, solved.q, normals, rule=retry_rule)
+        squeeze = program.squeeze(solved.q, pre2, retry, scale2)
+        other = replace(grasp, pregrasp=pre2, squeeze=squeeze, metrics={})
         again = validate(other, pieces, hand, protocol)
         times["retry"] = times.get("retry", 0.0) + time.perf_counter() - t3
         if again.success:
-            grasp, result, depth = other, again, retry
+            grasp, result, depth, rule = other, again, retry, retry_rule
             break
     part = grasp_part(hand, solved.wrist, solved.q, obj)  # None: an unlabelled object
     validation = result.to_dict()
@@ -544,6 +551,7 @@ def finish_grasp(
             "anchor_error": solved.anchor_error,
             "min_distance": solved.min_distance,
             "squeeze_depth": depth,
+            "pregrasp_rule": rule,
             "validation": validation,
         }
     )

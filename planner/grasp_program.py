@@ -91,6 +91,12 @@ class ProgramSettings:
     # chosen to cancel, planner.squeeze) or "normal" (each fingertip straight back along its
     # normal), either by the pregrasp clearance
     pregrasp_rule: str = "balanced"
+    # The closing validated once more, from a pregrasp by this rule at the hand's own squeeze
+    # depth, when a grasp still slips after the squeeze retries (finish_grasp); "none": no
+    # such retry, nor where it is the pregrasp rule itself. On the learned pipeline's first
+    # candidates (test split, two sample seeds) it held 5/3/2 more of 100 per hand after the
+    # depth retries (docs/planner_log.md, "A shallower squeeze retried")
+    retry_pregrasp_rule: str = "normal"
     # squeeze = grasp + depth x (grasp - pregrasp); None: the hand's hand.json `squeeze_depth`
     # (default 1, BODex's rule)
     squeeze_depth: float | None = None
@@ -119,6 +125,11 @@ class ProgramSettings:
         if self.pregrasp_rule not in PREGRASP_RULES:
             raise PlanningError(
                 f"unknown pregrasp_rule {self.pregrasp_rule!r}; use one of {PREGRASP_RULES}"
+            )
+        if self.retry_pregrasp_rule not in (*PREGRASP_RULES, "none"):
+            raise PlanningError(
+                f"unknown retry_pregrasp_rule {self.retry_pregrasp_rule!r}; use one of "
+                f"{(*PREGRASP_RULES, 'none')}"
             )
 
 
@@ -256,6 +267,16 @@ class GraspProgram:
         if depths is None:
             depths = self.hand.meta.retry_squeeze_depths
         return tuple(dict.fromkeys(float(d) for d in depths if d != self.squeeze_depth))
+
+    def retry_closings(self) -> list[tuple[float, str]]:
+        """The closings validated in turn after a slip, as (squeeze depth, pregrasp rule): the
+        retry squeeze depths with the program's pregrasp, then the hand's own depth from a
+        pregrasp by `settings.retry_pregrasp_rule` (unless "none" or the rule itself)."""
+        rule = self.settings.pregrasp_rule
+        closings = [(depth, rule) for depth in self.retry_squeeze_depths]
+        if self.settings.retry_pregrasp_rule not in ("none", rule):
+            closings.append((self.squeeze_depth, self.settings.retry_pregrasp_rule))
+        return closings
 
     @property
     def pregrasp_clearance(self) -> float:
@@ -502,12 +523,13 @@ class GraspProgram:
         q: np.ndarray,
         tip_normals: np.ndarray | None = None,
         clearance: float | None = None,
+        rule: str | None = None,
     ) -> tuple[np.ndarray, float]:
         """BODex's pregrasp: the grasp with contacts about `clearance` (default: the
         `pregrasp_clearance` property) off the surface, same wrist, so that the squeeze (grasp
         + depth x (grasp - pregrasp)) presses. With the object's outward
         normals at the anchor fingertips, each finger's joints move by the offset that sets its
-        squeeze force (`settings.pregrasp_rule`, see planner.squeeze), scaled so the fingertips
+        squeeze force (`rule`, default `settings.pregrasp_rule`, see planner.squeeze), scaled so the fingertips
         back off `clearance` along their normals on average; the other joints move toward the
         open pose by 0.3 of the way. Where that puts a link inside the object, or the closing
         through it, the offsets shrink (clear_of_object).
@@ -521,14 +543,19 @@ class GraspProgram:
             pre, scale = self._pregrasp_toward_open(wrist, q, clearance), 1.0
         else:
             pre, scale = self._balanced_or_normal_pregrasp(
-                wrist, q, np.asarray(tip_normals), clearance
+                wrist, q, np.asarray(tip_normals), clearance, rule or self.settings.pregrasp_rule
             )
         return rounded_within(pre, self.hand.lower, self.hand.upper), scale  # reproducible
 
     def _balanced_or_normal_pregrasp(
-        self, wrist: np.ndarray, q: np.ndarray, tip_normals: np.ndarray, clearance: float
+        self,
+        wrist: np.ndarray,
+        q: np.ndarray,
+        tip_normals: np.ndarray,
+        clearance: float,
+        rule: str,
     ) -> tuple[np.ndarray, float]:
-        """The pregrasp from the fingertips' normals, by `settings.pregrasp_rule`, and the
+        """The pregrasp from the fingertips' normals, by `rule` (PREGRASP_RULES), and the
         scale clear_of_object left its anchor offsets at."""
         centres = self.tip_centres(wrist, q)  # also sets the configuration
         plant, world = self.plant, self.plant.world_frame()
@@ -541,7 +568,7 @@ class GraspProgram:
             )[:, joints]
             for tip, frame in zip(self.tips, self.tip_frames, strict=True)
         ]
-        if self.settings.pregrasp_rule == "balanced":
+        if rule == "balanced":
             radii = np.array([t.radius for t in self.tips])[:, None]
             forces, _ = balanced_forces(centres - radii * normals, -normals)
         delta = np.zeros(self.hand.dof)
@@ -551,7 +578,7 @@ class GraspProgram:
             cols = np.flatnonzero(np.abs(jac).sum(axis=0) > 1e-9)
             cols = cols[~moved[cols]]  # joints shared with an earlier finger stay put
             j = jac[:, cols]
-            if self.settings.pregrasp_rule == "balanced":
+            if rule == "balanced":
                 # position control: torque = kp x (squeeze - q) = kp x (q - pregrasp), and a
                 # fingertip force f needs torque J^T f, so the offset is proportional to J^T f
                 step = -(j.T @ forces[i])

@@ -346,42 +346,71 @@ class _Verdict:
         return {"success": self.success}
 
 
-def test_a_slipping_grasp_is_validated_again_with_the_deeper_squeeze(hand_name, monkeypatch):
-    """finish_grasp validates the retry's squeeze only after a slip, and records the squeeze
-    that held; without a retry depth one validation decides."""
+def test_a_slipping_grasp_is_validated_again_with_other_closings(hand_name, monkeypatch):
+    """finish_grasp validates the retries' closings only after a slip, in turn (the other
+    squeeze depths, then a pregrasp by the retry rule), and records the closing that held;
+    without retries one validation decides."""
     hand = load_hand(hand_name)
     obj = make_object("bottle", 1)
     (proposal,) = FunctionalPlanner(
         hand, PlannerSettings(proposals=ProposalSettings(max_proposals=1, pinch_proposals=0))
     ).propose(obj, "body")
     targets = GraspTargets(proposal.wrist, proposal.q, proposal.anchors, proposal.normals)
-    squeezes: list[np.ndarray] = []
+    tried: list = []
 
-    def fake_validate(grasp, *args):  # holds only with the third squeeze
-        squeezes.append(grasp.squeeze)
-        return _Verdict(len(squeezes) == 3)
+    def fake_validate(grasp, *args):  # holds only with the third closing
+        tried.append(grasp)
+        return _Verdict(len(tried) == 3)
 
     monkeypatch.setattr(functional, "validate", fake_validate)
     settings = ProgramSettings(retry_squeeze_depths=(3.0, 0.5, 4.0))
     program = grasp_program(hand, obj.collision_pieces(), settings)
+    assert program.retry_closings() == [
+        (3.0, "balanced"),
+        (0.5, "balanced"),
+        (4.0, "balanced"),
+        (program.squeeze_depth, "normal"),
+    ]
     solved = program.solve(targets)
     done = functional.finish_grasp(program, obj, solved, "Hold a bottle by body", "paper")
     pre = done.grasp.pregrasp
-    tried = [program.squeeze(solved.q, pre, d) for d in (program.squeeze_depth, 3.0, 0.5)]
-    assert not np.allclose(tried[0], tried[1]) and not np.allclose(tried[0], tried[2])
-    assert len(squeezes) == 3  # the one that held ends the retries: 4.0 is never validated
-    assert all(np.array_equal(a, b) for a, b in zip(squeezes, tried, strict=True))
-    assert done.success and np.array_equal(done.grasp.squeeze, tried[2])
+    squeezes = [program.squeeze(solved.q, pre, d) for d in (program.squeeze_depth, 3.0, 0.5)]
+    assert not np.allclose(squeezes[0], squeezes[1]) and not np.allclose(squeezes[0], squeezes[2])
+    assert len(tried) == 3  # the one that held ends the retries: 4.0 is never validated
+    assert all(np.array_equal(g.squeeze, b) for g, b in zip(tried, squeezes, strict=True))
+    assert all(np.array_equal(g.pregrasp, pre) for g in tried)
+    assert done.success and np.array_equal(done.grasp.squeeze, squeezes[2])
     assert done.grasp.metrics["squeeze_depth"] == 0.5 and "retry" in done.times
+    assert done.grasp.metrics["pregrasp_rule"] == "balanced"
 
-    squeezes.clear()
-    monkeypatch.setattr(functional, "validate", lambda g, *a: squeezes.append(g) or _Verdict(False))
+    tried.clear()
+    monkeypatch.setattr(
+        functional, "validate", lambda g, *a: _Verdict(tried.append(g) or len(tried) == 5)
+    )
     done = functional.finish_grasp(program, obj, solved, "Hold a bottle by body", "paper")
-    assert len(squeezes) == 4 and not done.success  # all slip: the first squeeze is kept
-    assert np.array_equal(done.grasp.squeeze, tried[0])
+    assert len(tried) == 5 and done.success  # the last: the normal rule's own pregrasp
+    wrist_t, q_t = torch.tensor(solved.wrist[None]), torch.tensor(solved.q[None])
+    tips = hand.fingertip_positions(wrist_t, q_t, list(hand.meta.anchor_fingers))[0].numpy()
+    nearest = np.argmin(np.linalg.norm(obj.points[None] - tips[:, None], axis=2), axis=1)
+    normal, _ = program.closing(solved.wrist, solved.q, obj.normals[nearest], rule="normal")
+    assert np.array_equal(done.grasp.pregrasp, normal) and not np.allclose(normal, pre)
+    assert np.array_equal(done.grasp.squeeze, tried[-1].squeeze)
+    assert done.grasp.metrics["pregrasp_rule"] == "normal"
     assert done.grasp.metrics["squeeze_depth"] == program.squeeze_depth
 
-    squeezes.clear()
-    once = grasp_program(hand, obj.collision_pieces(), ProgramSettings(retry_squeeze_depths=()))
+    tried.clear()
+    monkeypatch.setattr(functional, "validate", lambda g, *a: tried.append(g) or _Verdict(False))
+    done = functional.finish_grasp(program, obj, solved, "Hold a bottle by body", "paper")
+    assert len(tried) == 5 and not done.success  # all slip: the first closing is kept
+    assert np.array_equal(done.grasp.squeeze, squeezes[0])
+    assert np.array_equal(done.grasp.pregrasp, pre)
+    assert done.grasp.metrics["squeeze_depth"] == program.squeeze_depth
+
+    tried.clear()
+    none = ProgramSettings(retry_squeeze_depths=(), retry_pregrasp_rule="none")
+    once = grasp_program(hand, obj.collision_pieces(), none)
+    assert once.retry_closings() == []
     done = functional.finish_grasp(once, obj, once.solve(targets), "Hold a bottle", "paper")
-    assert len(squeezes) == 1 and "retry" not in done.times
+    assert len(tried) == 1 and "retry" not in done.times
+    with pytest.raises(PlanningError, match="unknown retry_pregrasp_rule"):
+        ProgramSettings(retry_pregrasp_rule="sideways")

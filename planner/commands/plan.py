@@ -152,6 +152,7 @@ def print_summary(result: Any) -> None:
         if s["chosen_rank"] is None
         else f"chosen: {s['chosen_kind']} proposal {s['chosen_rank']}, "
         f"validated as #{s['chosen_validated_as']}, squeeze depth {s['chosen_squeeze_depth']:g}"
+        f" from a {s['chosen_pregrasp_rule']} pregrasp"
     )
     print(
         f"  candidates: {s['candidates_solved']} solved, {s['candidates_validated']} validated; "
