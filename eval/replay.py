@@ -147,29 +147,29 @@ def _benchmark_pair(r: dict) -> PairRecord:
     )
 
 
-def with_retry(records: list[PairRecord], deeper: list[PairRecord]) -> list[PairRecord]:
-    """`records` as a squeeze retry at the depth of `deeper` (deeper or shallower) would have
-    made them: a candidate that slipped holds where it held in `deeper` (its voted part depends
+def with_retry(records: list[PairRecord], other: list[PairRecord]) -> list[PairRecord]:
+    """`records` as a squeeze retry at the depth of `other` (deeper or shallower) would have
+    made them: a candidate that slipped holds where it held in `other` (its voted part depends
     on the grasp, not on the squeeze), and the retry's validation time is added. The two must
     hold the same pairs and the same solves: only the squeeze may differ."""
-    if len(records) != len(deeper):
-        raise RecordsError(f"{len(records)} records but {len(deeper)} with the deeper squeeze")
+    if len(records) != len(other):
+        raise RecordsError(f"{len(records)} records but {len(other)} with the other squeeze")
     merged = []
-    for rec, deep in zip(records, deeper, strict=True):
+    for rec, deep in zip(records, other, strict=True):
         key = (rec.hand, rec.category, rec.seed, rec.instruction)
         if key != (deep.hand, deep.category, deep.seed, deep.instruction):
             raise RecordsError(
-                f"the deeper squeeze's records hold {deep.instruction!r} where "
+                f"the other squeeze's records hold {deep.instruction!r} where "
                 f"{rec.instruction!r} was expected: record the same pairs"
             )
-        other = {c["rank"]: c for c in deep.candidate_summaries}
+        by_rank = {c["rank"]: c for c in deep.candidate_summaries}
         summaries = []
         for c in rec.candidate_summaries:
-            d = other.get(c["rank"])
+            d = by_rank.get(c["rank"])
             if d is None or (c["solved"], c["task_quality"]) != (d["solved"], d["task_quality"]):
                 raise RecordsError(
                     f"{rec.hand} {rec.category} {rec.seed}: candidate {c['rank']} was solved "
-                    "differently with the deeper squeeze; record both with the same settings "
+                    "differently with the other squeeze; record both with the same settings "
                     "but the squeeze depth"
                 )
             c = dict(c)

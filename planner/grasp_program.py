@@ -112,11 +112,7 @@ class ProgramSettings:
     def __post_init__(self) -> None:
         retry = self.retry_squeeze_depths
         if retry is not None and not (
-            isinstance(retry, tuple)
-            and all(
-                isinstance(d, int | float) and not isinstance(d, bool) and 0 < d < np.inf
-                for d in retry
-            )
+            isinstance(retry, tuple) and all(map(_positive_number, retry))
         ):
             raise PlanningError(
                 "retry_squeeze_depths must be a tuple of positive numbers like (0.5, 2.0), () "
@@ -134,6 +130,13 @@ class ProgramSettings:
 
 
 PREGRASP_RULES = ("balanced", "normal")
+
+
+def _positive_number(value: object) -> bool:
+    """A finite number above 0 (not a boolean, which Python counts as an int)."""
+    return isinstance(value, int | float) and not isinstance(value, bool) and 0 < value < np.inf
+
+
 # (anchor-finger offset scale, other joints' scale), tried in order by clear_of_object
 PREGRASP_SCALES = ((1.0, 1.0), (1.0, 0.0), (0.7, 0.0), (0.5, 0.0), (0.35, 0.0), (0.25, 0.0))
 
@@ -529,8 +532,8 @@ class GraspProgram:
         `pregrasp_clearance` property) off the surface, same wrist, so that the squeeze (grasp
         + depth x (grasp - pregrasp)) presses. With the object's outward
         normals at the anchor fingertips, each finger's joints move by the offset that sets its
-        squeeze force (`rule`, default `settings.pregrasp_rule`, see planner.squeeze), scaled so the fingertips
-        back off `clearance` along their normals on average; the other joints move toward the
+        squeeze force (`rule`, default `settings.pregrasp_rule`, see planner.squeeze), scaled so
+        the fingertips back off `clearance` along their normals on average; the other joints move toward the
         open pose by 0.3 of the way. Where that puts a link inside the object, or the closing
         through it, the offsets shrink (clear_of_object).
 

@@ -92,9 +92,7 @@ class CandidateResult:
             "min_distance_mm": 1000 * self.solve.min_distance,
             # the recorded closing: the hand's, or the retry's where only that one held
             "squeeze_depth": None if self.grasp is None else self.grasp.metrics["squeeze_depth"],
-            "pregrasp_rule": None
-            if self.grasp is None
-            else self.grasp.metrics.get("pregrasp_rule"),
+            "pregrasp_rule": None if self.grasp is None else self.grasp.metrics["pregrasp_rule"],
             "times": self.times,
         }
 
@@ -166,9 +164,7 @@ class PlanResult:
             "chosen_kind": None if best is None else best.proposal.kind,
             "chosen_validated_as": None if best is None else best.order,
             "chosen_squeeze_depth": None if best is None else best.grasp.metrics["squeeze_depth"],
-            "chosen_pregrasp_rule": (
-                None if best is None else best.grasp.metrics.get("pregrasp_rule")
-            ),
+            "chosen_pregrasp_rule": None if best is None else best.grasp.metrics["pregrasp_rule"],
             "times_s": self.stage_times(),
             "notes": self.notes,
         }
