@@ -54,6 +54,9 @@ class CandidateVerdicts:
     vendor_reason: str
     vendor_pregrasp_penetration: float
     coupling_violation: float  # rad: largest |A q| over the three phases (0 for coupled plans)
+    # the closing the grasp carries is one of the planner's retries (another squeeze depth or
+    # pregrasp rule than the first): it held only there
+    retried: bool = False
 
 
 @dataclass
@@ -113,6 +116,8 @@ def judge_pair(job: PairJob) -> PairVerdicts:
         pieces = obj.collision_pieces()
         vendor_hand = mjcf_hand(xml)
         best = result.best
+        program = settings.program
+        first = (program.squeeze_depth or planner.hand.meta.squeeze_depth, program.pregrasp_rule)
         for cand in result.candidates:
             if cand.grasp is None or cand.order is None:
                 continue
@@ -134,6 +139,8 @@ def judge_pair(job: PairJob) -> PairVerdicts:
                         model.coupling_violation(grasp.joints(phase))
                         for phase in ("pregrasp", "grasp", "squeeze")
                     ),
+                    retried=(grasp.metrics["squeeze_depth"], grasp.metrics["pregrasp_rule"])
+                    != first,
                 )
             )
     except Exception as err:  # noqa: BLE001 - a benchmark records failures and goes on
@@ -179,6 +186,8 @@ def summarize(records: Sequence[PairVerdicts]) -> list[dict]:
                 "returned": len(returned),
                 "returned_vendor_holds": sum(c.vendor for c in returned),
                 "returned_planner_holds": sum(c.planner for c in returned),
+                "retried": sum(c.retried for c in cands),
+                "retried_vendor_holds": sum(c.retried and c.vendor for c in cands),
             }
         )
     return rows
@@ -187,7 +196,8 @@ def summarize(records: Sequence[PairVerdicts]) -> list[dict]:
 def print_table(rows: Sequence[dict]) -> None:
     print(
         f"{'hand':<8} {'pairs':>5} {'cands':>5} {'planner':>7} {'project':>7} {'vendor':>6} "
-        f"{'agree':>11} {'proj-only':>9} {'vend-only':>9} {'returned held by vendor':>24}"
+        f"{'agree':>11} {'proj-only':>9} {'vend-only':>9} {'returned held by vendor':>24} "
+        f"{'held at a retry: by vendor':>27}"
     )
     for r in rows:
         print(
@@ -195,6 +205,7 @@ def print_table(rows: Sequence[dict]) -> None:
             f"{r['project_holds']:>7} {r['vendor_holds']:>6} "
             f"{r['agree']:>4}/{r['candidates']:<3} {r['agreement']:>4.0%} {r['project_only']:>9} "
             f"{r['vendor_only']:>9} {r['returned_vendor_holds']:>15}/{r['returned']:<3}"
+            f"{r['retried_vendor_holds']:>23}/{r['retried']:<3}"
             + (f"  ({r['errors']} errors)" if r["errors"] else "")
         )
 
