@@ -11,6 +11,7 @@ stages) and `program` (the grasp program); `with_overrides` sets them by dotted 
 from __future__ import annotations
 
 import dataclasses
+import difflib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
@@ -298,6 +299,7 @@ def with_overrides(settings: PlannerSettings, overrides: Mapping[str, object]) -
     for key, value in overrides.items():
         if key not in keys:
             like = [k for k in keys if k.rpartition(".")[2] == key or k.replace(".", "_") == key]
+            like = like or difflib.get_close_matches(key, keys, n=1)  # a typo, a renamed key
             hint = f" (did you mean {like[0]!r}?)" if len(like) == 1 and key not in GROUPS else ""
             raise PlanningError(
                 f"unknown planner setting {key!r}{hint}; the settings are: {', '.join(keys)}"

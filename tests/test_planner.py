@@ -101,6 +101,9 @@ def test_settings_overrides_by_dotted_key():
     assert "proposer" in keys and "proposals.max_proposals" in keys and "learned" not in keys
     with pytest.raises(PlanningError, match="did you mean 'schedule.max_candidates'"):
         with_overrides(base, {"max_candidates": 2})
+    # a renamed setting names its new key
+    with pytest.raises(PlanningError, match="did you mean 'program.retry_squeeze_depths'"):
+        with_overrides(base, {"program.retry_squeeze_depth": 0})
     with pytest.raises(PlanningError, match="unknown planner setting 'schedule'"):
         with_overrides(base, {"schedule": 2})
     with pytest.raises(PlanningError, match="learned.dro=True"):
