@@ -229,8 +229,8 @@ class ModelProposer:
         Handover: anchors 2 cm plus a fingertip's width from every other part (or 1 cm short of
         the part's farthest point from them, where it is smaller: a bottle's neck), toward the
         part's end away from the receiver's parts, and the palm on the side away from them.
-        Liftup: the palm facing down, anchors within `liftup_reach` below the part's top and
-        on the part's upper side. Hold: power grasps with the palm on the part (where it is
+        Liftup: the palm facing down, anchors within `liftup_reach` below the part's top,
+        `intent.liftup_toward_palm` up from the part's widest points. Hold: power grasps with the palm on the part (where it is
         as wide as the Hold rule asks) beside the regular proposals, all solved with Hold's
         program."""
         pts = obj.points[mask]
@@ -268,7 +268,8 @@ class ModelProposer:
                 upper = away & (height >= height.max() - self.settings.intent.liftup_reach)
                 away = upper if upper.sum() >= 8 else away
             frames = self._liftup_frames(axes[0], axes[1])
-            return _Shape(away, frames, toward_palm=0.5, mix=True, shaped_rows=True)
+            toward = self.settings.intent.liftup_toward_palm
+            return _Shape(away, frames, toward_palm=toward, mix=True, shaped_rows=True)
         if intent.intent == "Hold":
             offsets = pts - pts.mean(axis=0)
             width = max(np.ptp(offsets @ axes[1]), np.ptp(offsets @ axes[2]))

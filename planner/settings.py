@@ -154,6 +154,14 @@ class IntentSettings:
     # Liftup: anchors lie this far (m) below the part's top at most, where it is taller: fingers
     # reaching down from above
     liftup_reach: float = 0.045
+    # Liftup: how far the anchors climb from the part's widest points toward the palm (the
+    # weight of height against width when each fingertip's point is chosen; 0: the widest
+    # points, where the thumb and fingers squeeze straight across; below 0 they start lower
+    # and the table keeps the fingertips above the object's lowest point). At 0.5 (before)
+    # fingertips high on a flat handle squeezed it down and out: Liftup's 13 test and 13
+    # validation pairs per hand met Liftup 21/39 and 18/39 times at 0.5, 25 and - at 0.25,
+    # 27 and 29 at 0, 29 and 30 at -0.5, 26 and - at -1 (docs/intent_log.md).
+    liftup_toward_palm: float = -0.5
     # The grasp program's weights per intent (ProgramSettings field -> value), over `program`:
     # Hold pulls the palm onto its target harder (palm contact), Liftup keeps the proposal's
     # palm-down wrist rotation
@@ -177,6 +185,10 @@ class IntentSettings:
                     f"intent.program entry ({intent!r}, {name!r}): expected an intent of "
                     f"{INTENTS} and a ProgramSettings field"
                 )
+        if not -1 <= self.liftup_toward_palm <= 1:
+            raise PlanningError(
+                f"intent.liftup_toward_palm must be in [-1, 1], got {self.liftup_toward_palm}"
+            )
         if self.liftup_reach <= 0:
             raise PlanningError(f"intent.liftup_reach must be positive, got {self.liftup_reach}")
 

@@ -8,6 +8,7 @@ import pytest
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
+from models.errors import PlanningError
 from models.hands import load_hand
 from models.objects import make_object
 from models.objects.intents import RULES, definition
@@ -183,3 +184,20 @@ def test_liftup_plans_the_shaped_proposals_above_a_table(knife):
     )
     shaped = [p.shaped for p in proposals]
     assert any(shaped) and not all(shaped)
+
+
+def test_liftup_anchors_climb_toward_the_palm_as_set(hand_name, knife):
+    """`intent.liftup_toward_palm`: 0 puts the anchors at the handle's widest points (squeezed
+    straight across), higher values pull them up toward the palm above."""
+    meaning = definition("knife", "Liftup", "handle")
+
+    def heights(toward: float) -> np.ndarray:
+        settings = PlannerSettings(intent=IntentSettings(liftup_toward_palm=toward))
+        proposals = FunctionalPlanner(hand_name, settings).propose(knife, "handle", meaning)
+        shaped = [p for p in proposals if p.shaped]
+        return np.concatenate([anchored(p)[:, 2] for p in shaped])
+
+    across, up = heights(0.0), heights(1.0)
+    assert up.mean() > across.mean() + 0.001
+    with pytest.raises(PlanningError, match="liftup_toward_palm"):
+        IntentSettings(liftup_toward_palm=2.0)
