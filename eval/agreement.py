@@ -34,6 +34,7 @@ from models.hands.mjcf_frame import mjcf_root_offset
 from models.objects import make_object
 from planner.batch.executors import one_thread
 from planner.functional import FunctionalPlanner
+from planner.grasp_program import first_closing
 from planner.settings import PlannerSettings, ScheduleSettings
 from planner.validation import validate
 from planner.validation.hands import mjcf_hand, mjcf_joint_names
@@ -116,8 +117,7 @@ def judge_pair(job: PairJob) -> PairVerdicts:
         pieces = obj.collision_pieces()
         vendor_hand = mjcf_hand(xml)
         best = result.best
-        program = settings.program
-        first = (program.squeeze_depth or planner.hand.meta.squeeze_depth, program.pregrasp_rule)
+        first = first_closing(settings.program, planner.hand)
         for cand in result.candidates:
             if cand.grasp is None or cand.order is None:
                 continue

@@ -155,14 +155,14 @@ def with_retry(records: list[PairRecord], other: list[PairRecord]) -> list[PairR
     if len(records) != len(other):
         raise RecordsError(f"{len(records)} records but {len(other)} with the other squeeze")
     merged = []
-    for rec, deep in zip(records, other, strict=True):
+    for rec, alt in zip(records, other, strict=True):
         key = (rec.hand, rec.category, rec.seed, rec.instruction)
-        if key != (deep.hand, deep.category, deep.seed, deep.instruction):
+        if key != (alt.hand, alt.category, alt.seed, alt.instruction):
             raise RecordsError(
-                f"the other squeeze's records hold {deep.instruction!r} where "
+                f"the other squeeze's records hold {alt.instruction!r} where "
                 f"{rec.instruction!r} was expected: record the same pairs"
             )
-        by_rank = {c["rank"]: c for c in deep.candidate_summaries}
+        by_rank = {c["rank"]: c for c in alt.candidate_summaries}
         summaries = []
         for c in rec.candidate_summaries:
             d = by_rank.get(c["rank"])

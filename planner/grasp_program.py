@@ -132,6 +132,13 @@ class ProgramSettings:
 PREGRASP_RULES = ("balanced", "normal")
 
 
+def first_closing(settings: ProgramSettings, hand: HandModel) -> tuple[float, str]:
+    """The closing validated first, as (squeeze depth, pregrasp rule): the settings' squeeze
+    depth, else the hand's (hand.json); a grasp recording another held only at a retry."""
+    depth = settings.squeeze_depth
+    return (hand.meta.squeeze_depth if depth is None else depth), settings.pregrasp_rule
+
+
 def _positive_number(value: object) -> bool:
     """A finite number above 0 (not a boolean, which Python counts as an int)."""
     return isinstance(value, int | float) and not isinstance(value, bool) and 0 < value < np.inf
@@ -258,8 +265,7 @@ class GraspProgram:
     @property
     def squeeze_depth(self) -> float:
         """The settings' squeeze depth, else the hand's (hand.json)."""
-        depth = self.settings.squeeze_depth
-        return self.hand.meta.squeeze_depth if depth is None else depth
+        return first_closing(self.settings, self.hand)[0]
 
     @property
     def retry_squeeze_depths(self) -> tuple[float, ...]:
@@ -533,8 +539,8 @@ class GraspProgram:
         + depth x (grasp - pregrasp)) presses. With the object's outward
         normals at the anchor fingertips, each finger's joints move by the offset that sets its
         squeeze force (`rule`, default `settings.pregrasp_rule`, see planner.squeeze), scaled so
-        the fingertips back off `clearance` along their normals on average; the other joints move toward the
-        open pose by 0.3 of the way. Where that puts a link inside the object, or the closing
+        the fingertips back off `clearance` along their normals on average; the other joints
+        move toward the open pose by 0.3 of the way. Where that puts a link inside the object, or the closing
         through it, the offsets shrink (clear_of_object).
 
         Returns the pregrasp and the scale of its anchor offsets (1 unless they shrank), for

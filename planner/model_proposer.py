@@ -230,9 +230,9 @@ class ModelProposer:
         the part's farthest point from them, where it is smaller: a bottle's neck), toward the
         part's end away from the receiver's parts, and the palm on the side away from them.
         Liftup: the palm facing down, anchors within `liftup_reach` below the part's top,
-        `intent.liftup_toward_palm` up from the part's widest points. Hold: power grasps with the palm on the part (where it is
-        as wide as the Hold rule asks) beside the regular proposals, all solved with Hold's
-        program."""
+        `intent.liftup_toward_palm` up from the part's widest points. Hold: power grasps with
+        the palm on the part (where it is as wide as the Hold rule asks) beside the regular
+        proposals, all solved with Hold's program."""
         pts = obj.points[mask]
         tip = float(np.mean(self.geometry.tip_radii))
         away = shape.away
@@ -268,8 +268,8 @@ class ModelProposer:
                 upper = away & (height >= height.max() - self.settings.intent.liftup_reach)
                 away = upper if upper.sum() >= 8 else away
             frames = self._liftup_frames(axes[0], axes[1])
-            toward = self.settings.intent.liftup_toward_palm
-            return _Shape(away, frames, toward_palm=toward, mix=True, shaped_rows=True)
+            toward_palm = self.settings.intent.liftup_toward_palm
+            return _Shape(away, frames, toward_palm=toward_palm, mix=True, shaped_rows=True)
         if intent.intent == "Hold":
             offsets = pts - pts.mean(axis=0)
             width = max(np.ptp(offsets @ axes[1]), np.ptp(offsets @ axes[2]))

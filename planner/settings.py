@@ -158,9 +158,9 @@ class IntentSettings:
     # weight of height against width when each fingertip's point is chosen; 0: the widest
     # points, where the thumb and fingers squeeze straight across; below 0 they start lower
     # and the table keeps the fingertips above the object's lowest point). At 0.5 (before)
-    # fingertips high on a flat handle squeezed it down and out: Liftup's 13 test and 13
-    # validation pairs per hand met Liftup 21/39 and 18/39 times at 0.5, 25 and - at 0.25,
-    # 27 and 29 at 0, 29 and 30 at -0.5, 26 and - at -1 (docs/intent_log.md).
+    # fingertips high on a flat handle squeezed it down and out: of the 39 Liftup pairs of the
+    # test split (and of the validation split), 21 (18) met Liftup at 0.5, 27 (29) at 0 and
+    # 29 (30) at -0.5; 0.25 and -1 gave 25 and 26 on test (docs/intent_log.md).
     liftup_toward_palm: float = -0.5
     # The grasp program's weights per intent (ProgramSettings field -> value), over `program`:
     # Hold pulls the palm onto its target harder (palm contact), Liftup keeps the proposal's
