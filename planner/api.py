@@ -51,6 +51,8 @@ _RANGES: dict[str, dict[str, tuple[float | None, float | None]]] = {
     },
     "program": {
         "major_iterations": (1, None),
+        "wrist_position_scale": (1e-6, None),
+        "wrist_quaternion_scale": (1e-6, None),
         "anchor_tolerance": (0.0, None),
         "influence_distance": (0.0, None),
         "squeeze_depth": (0.0, None),

@@ -204,7 +204,7 @@ def test_pregrasp_offsets_shrink_until_clear_of_the_object(hand_name):
     wrist, q = solved.wrist, solved.q
     anchor_joints = np.ones(hand.dof, dtype=bool)
     # an offset that closes every joint a little further drives the fingers a few mm into the bottle
-    inward = 0.012 * hand.closing_direction * (hand.upper - hand.lower)
+    inward = 0.015 * hand.closing_direction * (hand.upper - hand.lower)
     assert program.hand_object_distance(wrist, np.clip(q + inward, hand.lower, hand.upper)) < -0.002
     pre = program.clear_of_object(wrist, q, inward, anchor_joints)
     bound = min(-program.settings.pregrasp_penetration, program.hand_object_distance(wrist, q))
