@@ -229,7 +229,11 @@ def test_the_closing_path_from_the_pregrasp_stays_clear_of_the_object():
     hand = load_hand("shadow")
     obj = make_object("knife", 13)
     proposal = FunctionalPlanner(hand).propose(obj, "handle")[1]
-    solved = grasp_program(hand, obj.collision_pieces()).solve(
+    # the grasp the case was found with, solved unscaled: scaled, none of 80 knife-handle
+    # solves (seeds 10-29, first 4 proposals) nor of about 150 on pan, hammer, mug and knife
+    # handles had a closing path more than 3.4 mm inside
+    unscaled = ProgramSettings(wrist_position_scale=1.0, wrist_quaternion_scale=1.0)
+    solved = grasp_program(hand, obj.collision_pieces(), unscaled).solve(
         GraspTargets(
             proposal.wrist,
             proposal.q,

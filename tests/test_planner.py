@@ -355,7 +355,7 @@ def test_a_plan_without_a_grasp_chooses_no_candidate():
     settings = PlannerSettings(
         schedule=ScheduleSettings(max_candidates=1), proposals=ProposalSettings(max_proposals=2)
     )
-    result = FunctionalPlanner("leap", settings).plan(make_object("mug", 3), "Use a mug by handle")
+    result = FunctionalPlanner("leap", settings).plan(make_object("mug", 0), "Use a mug by handle")
     assert result.grasp is None and not result.success
     assert any(c.grasp is None and c.order is None for c in result.candidates)
     summary = result.summary()
