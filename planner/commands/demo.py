@@ -63,7 +63,7 @@ def run(args: argparse.Namespace) -> int:
     )
     rows = []
     header = (
-        f"{'hand':<8} {'instruction':<24} {'success':<8} {'part touched':<13} "
+        f"{'hand':<8} {'instruction':<24} {'holds':<8} {'part touched':<13} "
         f"{'intent met':<10} {'time s':>7}"
     )
     print(header)
@@ -117,7 +117,7 @@ def _learned(hands: list[str], out) -> list[tuple]:
         flush=True,
     )
     header = (
-        f"{'hand':<8} {'sentence':<34} {'read as':<28} {'success':<8} {'intent met':<10} "
+        f"{'hand':<8} {'sentence':<34} {'read as':<28} {'holds':<8} {'intent met':<10} "
         f"{'time s':>7}"
     )
     print(header)
