@@ -192,6 +192,22 @@ def test_balanced_pregrasp_backs_off_and_balances_the_squeeze(hand_name):
     assert nets["balanced"] < nets["normal"], nets
 
 
+def test_scaled_wrist_variables_let_snopt_converge(hand_name):
+    """Unscaled (1 m, 1), SNOPT runs the bottle-body solve to its iteration cap; with the
+    wrist's position and quaternion scaled (the defaults) it ends at an optimum, and the answer
+    moves: the settings reach SNOPT (docs/planner_log.md, "Scaled wrist variables")."""
+    hand = load_hand(hand_name)
+    obj = make_object("bottle", 1)
+    proposal = FunctionalPlanner(hand).propose(obj, "body")[0]
+    targets = GraspTargets(proposal.wrist, proposal.q, proposal.anchors, proposal.normals)
+    unscaled = ProgramSettings(wrist_position_scale=1.0, wrist_quaternion_scale=1.0)
+    before = grasp_program(hand, obj.collision_pieces(), unscaled).solve(targets)
+    scaled = grasp_program(hand, obj.collision_pieces()).solve(targets)
+    assert before.solver_status == "kIterationLimit"
+    assert scaled.solver_status == "kSolutionFound"
+    assert scaled.ok and not np.allclose(scaled.wrist, before.wrist, atol=1e-3)
+
+
 def test_pregrasp_offsets_shrink_until_clear_of_the_object(hand_name):
     hand = load_hand(hand_name)
     obj = make_object("bottle", 1)
