@@ -551,8 +551,8 @@ class GraspProgram:
         normals at the anchor fingertips, each finger's joints move by the offset that sets its
         squeeze force (`rule`, default `settings.pregrasp_rule`, see planner.squeeze), scaled so
         the fingertips back off `clearance` along their normals on average; the other joints
-        move toward the open pose by 0.3 of the way. Where that puts a link inside the object, or the closing
-        through it, the offsets shrink (clear_of_object).
+        move toward the open pose by 0.3 of the way. Where that puts a link inside the object,
+        or the closing through it, the offsets shrink (clear_of_object).
 
         Returns the pregrasp and the scale of its anchor offsets (1 unless they shrank), for
         `squeeze(..., scale=scale)`."""

@@ -17,6 +17,9 @@ from planner.functional import FunctionalPlanner, PlannerSettings
 from planner.grasp_program import PREGRASP_SCALES, GraspTargets, ProgramSettings, grasp_program
 from planner.settings import ProposalSettings
 
+# the grasp program as it solved before SNOPT's wrist variables were scaled
+UNSCALED = ProgramSettings(wrist_position_scale=1.0, wrist_quaternion_scale=1.0)
+
 
 def _check_feasible(hand, program, result) -> None:
     """Joints within limits and the distance re-checked; an accepted answer does not penetrate
@@ -200,8 +203,7 @@ def test_scaled_wrist_variables_let_snopt_converge(hand_name):
     obj = make_object("bottle", 1)
     proposal = FunctionalPlanner(hand).propose(obj, "body")[0]
     targets = GraspTargets(proposal.wrist, proposal.q, proposal.anchors, proposal.normals)
-    unscaled = ProgramSettings(wrist_position_scale=1.0, wrist_quaternion_scale=1.0)
-    before = grasp_program(hand, obj.collision_pieces(), unscaled).solve(targets)
+    before = grasp_program(hand, obj.collision_pieces(), UNSCALED).solve(targets)
     scaled = grasp_program(hand, obj.collision_pieces()).solve(targets)
     assert before.solver_status == "kIterationLimit"
     assert scaled.solver_status == "kSolutionFound"
@@ -248,8 +250,7 @@ def test_the_closing_path_from_the_pregrasp_stays_clear_of_the_object():
     # the grasp the case was found with, solved unscaled: scaled, none of 80 knife-handle
     # solves (seeds 10-29, first 4 proposals) nor of about 150 on pan, hammer, mug and knife
     # handles had a closing path more than 3.4 mm inside
-    unscaled = ProgramSettings(wrist_position_scale=1.0, wrist_quaternion_scale=1.0)
-    solved = grasp_program(hand, obj.collision_pieces(), unscaled).solve(
+    solved = grasp_program(hand, obj.collision_pieces(), UNSCALED).solve(
         GraspTargets(
             proposal.wrist,
             proposal.q,
