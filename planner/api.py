@@ -126,7 +126,7 @@ def check_settings(settings: Any = None) -> Any:
             f"{type(settings).__name__}; e.g. "
             "PlannerSettings(schedule=ScheduleSettings(max_candidates=4))"
         )
-    _check_fields(settings, "settings", {})
+    _check_fields(settings, "settings", {"cloud_checks": (0, None)})
     if not isinstance(settings.protocol, str | Protocol):
         raise SettingsError(
             f"settings.protocol must be a preset name or a Protocol, got {settings.protocol!r}"

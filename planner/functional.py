@@ -460,7 +460,8 @@ class FunctionalPlanner:
 
     def _validate(self, program, obj, instruction, cand: CandidateResult) -> None:
         """Complete the candidate's grasp, validate it and vote its part (fills `cand`)."""
-        done = finish_grasp(program, obj, cand.solve, instruction.text, self.settings.protocol)
+        s = self.settings
+        done = finish_grasp(program, obj, cand.solve, instruction.text, s.protocol, s.cloud_checks)
         done.grasp.metrics["epsilon"] = cand.quality
         if cand.intent is not None:
             done.grasp.metrics["intent_ok"] = cand.intent.ok
@@ -496,7 +497,12 @@ class FinishedGrasp:
 
 
 def finish_grasp(
-    program: GraspProgram, obj: ObjectModel, solved: SolveResult, instruction: str, protocol: str
+    program: GraspProgram,
+    obj: ObjectModel,
+    solved: SolveResult,
+    instruction: str,
+    protocol: str,
+    cloud_checks: int = 0,
 ) -> FinishedGrasp:
     """Pregrasp (anchor fingertips about 1 cm off the surface, offsets set by balanced squeeze
     forces and shrunk where a link, or the closing's path, would be inside the object:
@@ -504,7 +510,9 @@ def finish_grasp(
     transferred grasp goes through these same steps. A grasp that slips is validated again with
     each closing of `program.retry_closings()` in turn (other squeeze depths, then another
     pregrasp rule), up to the first that holds; the pregrasp and squeeze that held are the ones
-    recorded (`metrics["squeeze_depth"]`, `metrics["pregrasp_rule"]`)."""
+    recorded (`metrics["squeeze_depth"]`, `metrics["pregrasp_rule"]`). On a bare cloud a grasp
+    that held must hold on `cloud_checks` other piece sets of the cloud too
+    (ObjectModel.piece_variants), or it counts as slipped (validation["cloud_checks"])."""
     t1 = time.perf_counter()
     hand = program.hand
     wrist_t = torch.tensor(solved.wrist[None])
@@ -542,8 +550,19 @@ def finish_grasp(
         if again.success:
             grasp, result, depth, rule = other, again, retry, retry_rule
             break
-    part = grasp_part(hand, solved.wrist, solved.q, obj)  # None: an unlabelled object
     validation = result.to_dict()
+    if result.success and cloud_checks > 0:
+        t4 = time.perf_counter()
+        variants = obj.piece_variants(cloud_checks)
+        held = [validate(grasp, other, hand, protocol).success for other in variants]
+        times["cloud_checks"] = time.perf_counter() - t4
+        if variants:
+            validation["cloud_checks"] = {"held": int(sum(held)), "of": len(held)}
+            if not all(held):
+                result.success = False
+                validation["success"] = False
+                validation["reason"] = "slipped on other pieces of the cloud"
+    part = grasp_part(hand, solved.wrist, solved.q, obj)  # None: an unlabelled object
     grasp.metrics.update(
         {
             "success": bool(result.success),

@@ -262,6 +262,12 @@ class PlannerSettings:
     # guessed by mirror symmetry (models.objects.completion): without it fingers are planned
     # through the unseen back of the object. The grasp is in the input's frame either way.
     complete_views: bool = True
+    # A grasp planned on a bare cloud must also hold on this many other sets of collision
+    # pieces, each from a random 70% of the cloud's points (ObjectModel.piece_variants): the
+    # pieces follow the surface only to about the points' spacing, and grasps that hold on one
+    # such guess but not on others are most of those that slip on the real object
+    # (docs/planner_log.md, "Cloud checks"). 0: no check. Meshes have exact pieces: no effect.
+    cloud_checks: int = 2
     schedule: ScheduleSettings = field(default_factory=ScheduleSettings)
     proposals: ProposalSettings = field(default_factory=ProposalSettings)
     intent: IntentSettings = field(default_factory=IntentSettings)

@@ -574,6 +574,7 @@ def test_plan_grasp_refuses_bad_settings_before_planning():
         ({"proposals.span_factor": float("nan")}, "proposals.span_factor must be finite"),
         ({"proposals.use_palm": "no"}, "proposals.use_palm must be True or False"),
         ({"learned.samples": 0}, "settings.learned.samples must be at least 1"),
+        ({"cloud_checks": -1}, "settings.cloud_checks must be at least 0"),
         (
             {"program.wrist_position_scale": 0},
             "settings.program.wrist_position_scale must be at least 1e-06",

@@ -153,21 +153,7 @@ class ObjectModel:
         limit, cached on disk), "surface" (cloud pieces from the mesh's surface samples, in
         about a second) or "cloud" (from surface points).
         """
-        open_mesh = False  # "auto" chose surface pieces for an open mesh: warn
-        if method == "auto" and self.pieces != "auto":
-            method = self.pieces
-        if method == "auto":
-            if self.construction_pieces is not None:
-                method = "construction"
-            elif self.mesh is None:
-                method = "cloud"
-            elif self.mesh.is_watertight:
-                method = "coacd"
-            else:
-                method = "surface"
-                open_mesh = True
-        if method not in PIECE_METHODS:
-            raise ObjectError(f"unknown method {method!r}: one of {', '.join(PIECE_METHODS)}")
+        method, open_mesh = self._piece_method(method)
         key = f"pieces-{method}"
         if open_mesh and key not in self._derived:  # once per object, not per caller
             warnings.warn(
@@ -205,6 +191,41 @@ class ObjectModel:
                 )
             self._derived[key] = pieces
         return self._derived[key]
+
+    def _piece_method(self, method: str) -> tuple[str, bool]:
+        """The method "auto" stands for here, and whether it chose surface pieces for an open
+        mesh (which deserves a warning)."""
+        if method == "auto" and self.pieces != "auto":
+            method = self.pieces
+        if method == "auto":
+            if self.construction_pieces is not None:
+                return "construction", False
+            if self.mesh is None:
+                return "cloud", False
+            return ("coacd", False) if self.mesh.is_watertight else ("surface", True)
+        if method not in PIECE_METHODS:
+            raise ObjectError(f"unknown method {method!r}: one of {', '.join(PIECE_METHODS)}")
+        return method, False
+
+    def piece_variants(self, count: int, keep: float = 0.7) -> list[list[trimesh.Trimesh]]:
+        """`count` other sets of collision pieces of a bare cloud, each made from a seeded random
+        `keep` share of its points; [] where `collision_pieces()` are not a cloud's (a mesh's
+        pieces are the surface itself). A cloud's pieces follow the real surface only to about
+        the points' spacing, and a grasp that holds on them but slips on these often slips on
+        the real object (docs/planner_log.md, "Cloud checks"): the planner checks its grasps on
+        them too (PlannerSettings.cloud_checks)."""
+        if count <= 0 or self._piece_method("auto")[0] != "cloud":
+            return []
+        made = self._derived.setdefault(f"piece-variants-{keep}", [])
+        pts, nrm = self.points, self.normals
+        while len(made) < count:
+            rng = np.random.default_rng([len(made), 7])
+            kept = rng.random(len(pts)) < keep
+            pieces = collision.cloud_pieces(pts[kept], nrm[kept], seed=len(made) + 1)
+            if not pieces:
+                raise ObjectError(f"{self.name}: a subset of the cloud gave no piece with volume")
+            made.append(pieces)
+        return made[:count]
 
 
 PIECE_METHODS = ("auto", "construction", "coacd", "surface", "cloud")
