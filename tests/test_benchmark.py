@@ -124,3 +124,18 @@ def test_each_view_gives_the_planner_its_input_and_judges_on_the_object(view, mo
         assert obj.mesh is None and len(obj.points) == benchmark.CLOUD_POINTS
     else:
         assert obj.mesh is not None
+
+
+def test_cloud_checks_table_counts_what_each_number_of_checks_keeps():
+    from eval.cloud_checks import table
+
+    key = {"hand": "leap", "category": "mug", "seed": 3, "instruction": "Use a mug by handle"}
+    rows = [
+        key | {"rank": 0, "checks": [True, True], "real": True},
+        key | {"rank": 1, "checks": [True, False], "real": False},
+        key | {"rank": 2, "checks": [False, True], "real": True},
+    ]
+    lines = table(rows, 2).splitlines()
+    assert lines[2] == "| leap | 0 | 3 | 3 | 2 (67%) | 0 of 0 |"
+    assert lines[3] == "| leap | 1 | 3 | 2 | 1 (50%) | 1 of 1 |"
+    assert lines[4] == "| leap | 2 | 3 | 1 | 1 (100%) | 1 of 2 |"

@@ -435,3 +435,56 @@ def test_a_slipping_grasp_is_validated_again_with_other_closings(hand_name, monk
     assert len(tried) == 1 and "retry" not in done.times
     with pytest.raises(PlanningError, match="unknown retry_pregrasp_rule"):
         ProgramSettings(retry_pregrasp_rule="sideways")
+
+
+def test_a_grasp_on_a_cloud_must_also_hold_on_its_piece_variants(hand_name, monkeypatch):
+    """finish_grasp's cloud checks: a grasp that held on a bare cloud's pieces is validated on
+    `cloud_checks` piece variants and counts as slipped unless it holds on all; a grasp that
+    slipped is not checked, and a mesh's exact pieces get no checks."""
+    from models.objects import load_object
+
+    hand = load_hand(hand_name)
+    bottle = make_object("bottle", 1)
+    cloud = load_object(bottle.sample_cloud(4096, seed=1).points)
+    (proposal,) = FunctionalPlanner(
+        hand, PlannerSettings(proposals=ProposalSettings(max_proposals=1, pinch_proposals=0))
+    ).propose(bottle, "body")
+    targets = GraspTargets(proposal.wrist, proposal.q, proposal.anchors, proposal.normals)
+    none = ProgramSettings(retry_squeeze_depths=(), retry_pregrasp_rule="none")
+    program = grasp_program(hand, cloud.collision_pieces(), none)
+    solved = program.solve(targets)
+    variants = cloud.piece_variants(2)
+    seen: list = []
+
+    def holds_except(*failing):
+        def fake(grasp, pieces, *args):
+            seen.append(pieces)
+            return _Verdict(not any(pieces is variants[i] for i in failing))
+
+        return fake
+
+    def finish(obj=cloud, checks=2):
+        return functional.finish_grasp(program, obj, solved, "Hold a bottle", "paper", checks)
+
+    monkeypatch.setattr(functional, "validate", holds_except())
+    done = finish()
+    assert done.success and done.validation["cloud_checks"] == {"held": 2, "of": 2}
+    assert seen == [cloud.collision_pieces(), *variants] and "cloud_checks" in done.times
+
+    seen.clear()
+    monkeypatch.setattr(functional, "validate", holds_except(1))
+    done = finish()
+    assert not done.success and not done.grasp.metrics["success"]
+    assert done.validation["cloud_checks"] == {"held": 1, "of": 2}
+    assert done.validation["reason"] == "slipped on other pieces of the cloud"
+
+    seen.clear()
+    monkeypatch.setattr(functional, "validate", lambda g, p, *a: seen.append(p) or _Verdict(False))
+    done = finish()
+    assert not done.success and len(seen) == 1 and "cloud_checks" not in done.validation
+
+    for obj, checks in ((cloud, 0), (bottle, 2)):
+        seen.clear()
+        monkeypatch.setattr(functional, "validate", holds_except())
+        done = finish(obj, checks)
+        assert done.success and len(seen) == 1 and "cloud_checks" not in done.validation

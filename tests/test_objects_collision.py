@@ -192,3 +192,26 @@ def test_reference_mesh_gets_coacd_pieces(index):
     hi = np.max([p.bounds[1] for p in pieces], axis=0)
     np.testing.assert_allclose(lo, obj.mesh.bounds[0], atol=0.01)
     np.testing.assert_allclose(hi, obj.mesh.bounds[1], atol=0.01)
+
+
+def test_piece_variants_of_a_cloud_are_other_seeded_guesses_and_a_mesh_has_none():
+    """The planner's cloud checks (PlannerSettings.cloud_checks) need piece sets that differ
+    from the cloud's own pieces the way another scan of the object would, and are the same on
+    every run; a mesh's pieces are its surface, so it has none."""
+    mug = make_object("mug", 3)
+    assert mug.piece_variants(2) == []
+    points = mug.sample_cloud(4096, seed=3).points
+    cloud, again = load_object(points), load_object(points)
+    variants = cloud.piece_variants(2)
+    assert len(variants) == 2 and cloud.piece_variants(0) == []
+    assert cloud.piece_variants(1)[0] is variants[0]  # made once per object
+    own = np.vstack([p.vertices for p in cloud.collision_pieces()])
+    for made, remade in zip(variants, again.piece_variants(2), strict=True):
+        verts = np.vstack([p.vertices for p in made])
+        assert np.array_equal(verts, np.vstack([p.vertices for p in remade]))
+        assert verts.shape != own.shape or not np.array_equal(verts, own)
+        # each still covers the mug: most of its surface lies within 3 mm of a piece
+        near = [contains(made, p, tol=0.003) for p in mug.sample_cloud(200, seed=1).points]
+        assert np.mean(near) > 0.9
+    one, two = (np.vstack([p.vertices for p in v]) for v in variants)
+    assert one.shape != two.shape or not np.array_equal(one, two)
