@@ -85,6 +85,10 @@ class CandidateResult:
             "quality": self.quality,
             "task_quality": self.task_quality,
             "validated_as": self.order,
+            # held of the piece variants checked (a bare cloud's grasp that held), else None
+            "cloud_checks": None
+            if self.validation is None
+            else self.validation.get("cloud_checks"),
             "pregrasp_penetration_mm": (
                 None if self.validation is None else 1000 * self.validation["pregrasp_penetration"]
             ),
