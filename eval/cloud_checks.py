@@ -30,8 +30,7 @@ from planner.validation.validator import validate
 def measure(hand: str, category: str, seed: int, instruction: str, variants: int) -> list[dict]:
     """One row per candidate that held on the cloud's pieces: held on each variant, and on
     the real object."""
-    over = {"cloud_checks": 0, "schedule.validate_all": True, "schedule.max_candidates": 8}
-    planner = _planner(hand, over)
+    planner = _planner(hand)
     obj = full_object(category, seed, False)
     cloud = sampled_cloud_object(obj, CLOUD_POINTS, seed=seed)
     result = planner.plan(cloud, instruction)
@@ -44,17 +43,28 @@ def measure(hand: str, category: str, seed: int, instruction: str, variants: int
             bool(validate(cand.grasp, pieces, planner.hand, protocol).success)
             for pieces in cloud.piece_variants(variants)
         ]
-        key = {"hand": hand, "category": category, "seed": seed, "instruction": instruction}
-        rows.append(key | {"rank": cand.rank, "checks": checks, "real": bool(real)})
+        row = {"rank": cand.rank, "checks": checks, "real": bool(real)}
+        rows.append(pair_key(hand, category, seed, instruction) | row)
     return rows
 
 
+# the fields of a row that name its pair (what a resumed run skips)
+PAIR_FIELDS = ("hand", "category", "seed", "instruction")
+
+
+def pair_key(*pair: object) -> dict:
+    """A row's pair fields, from (hand, category, seed, instruction)."""
+    return dict(zip(PAIR_FIELDS, pair, strict=True))
+
+
+# the checks off and every candidate validated, so each can be judged afterwards
+_OVERRIDES = {"cloud_checks": 0, "schedule.validate_all": True, "schedule.max_candidates": 8}
 _PLANNERS: dict[str, FunctionalPlanner] = {}
 
 
-def _planner(hand: str, over: dict) -> FunctionalPlanner:
+def _planner(hand: str) -> FunctionalPlanner:
     if hand not in _PLANNERS:
-        _PLANNERS[hand] = FunctionalPlanner(hand, with_overrides(PlannerSettings(), over))
+        _PLANNERS[hand] = FunctionalPlanner(hand, with_overrides(PlannerSettings(), _OVERRIDES))
     return _PLANNERS[hand]
 
 
@@ -95,7 +105,7 @@ def main() -> None:
     if args.out.exists():
         for line in args.out.read_text().splitlines():
             row = json.loads(line)
-            done.add((row["hand"], row["category"], row["seed"], row["instruction"]))
+            done.add(tuple(row[k] for k in PAIR_FIELDS))
             if row.get("rank") is not None:
                 rows.append(row)
     chosen = pairs(args.split, args.objects_per_category, args.hands)
@@ -103,9 +113,8 @@ def main() -> None:
     with args.out.open("a") as out:
         for hand, category, seed, instruction in tqdm(todo, desc="cloud checks"):
             found = measure(hand, category, seed, instruction, args.variants)
-            key = {"hand": hand, "category": category, "seed": seed, "instruction": instruction}
             # a pair without a held candidate still gets a line, so a resumed run skips it
-            for row in found or [key | {"rank": None}]:
+            for row in found or [pair_key(hand, category, seed, instruction) | {"rank": None}]:
                 out.write(json.dumps(row) + "\n")
             out.flush()
             rows += found

@@ -550,18 +550,19 @@ def finish_grasp(
         if again.success:
             grasp, result, depth, rule = other, again, retry, retry_rule
             break
-    validation = result.to_dict()
+    checked: dict[str, int] | None = None  # held of the piece variants, where checked
     if result.success and cloud_checks > 0:
         t4 = time.perf_counter()
         variants = obj.piece_variants(cloud_checks)
-        held = [validate(grasp, other, hand, protocol).success for other in variants]
+        held = [validate(grasp, variant, hand, protocol).success for variant in variants]
         times["cloud_checks"] = time.perf_counter() - t4
         if variants:
-            validation["cloud_checks"] = {"held": int(sum(held)), "of": len(held)}
+            checked = {"held": int(sum(held)), "of": len(held)}
             if not all(held):
-                result.success = False
-                validation["success"] = False
-                validation["reason"] = "slipped on other pieces of the cloud"
+                result.success, result.reason = False, "slipped on other pieces of the cloud"
+    validation = result.to_dict()
+    if checked is not None:
+        validation["cloud_checks"] = checked
     part = grasp_part(hand, solved.wrist, solved.q, obj)  # None: an unlabelled object
     grasp.metrics.update(
         {

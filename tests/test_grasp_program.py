@@ -361,10 +361,13 @@ def test_a_row_of_nan_anchors_leaves_that_finger_free(hand_name):
 
 @dataclass
 class _Verdict:
+    """A ValidationResult's fields that finish_grasp reads and sets."""
+
     success: bool
+    reason: str = ""
 
     def to_dict(self) -> dict:
-        return {"success": self.success}
+        return {"success": self.success, "reason": self.reason}
 
 
 def test_a_slipping_grasp_is_validated_again_with_other_closings(hand_name, monkeypatch):
