@@ -110,6 +110,10 @@ class Record:
     # the returned grasp held on what the method planned on (a cloud: pieces made from it; a
     # single view: its completion); `held` is the same grasp on the full object
     planned: bool = False
+    # no grasp passed the cloud checks and the returned one is uncertain (PlanResult.status);
+    # `uncertain_held`: it held on the full object
+    uncertain: bool = False
+    uncertain_held: bool = False
     part_touched: str | None = None
     # the returned grasp, held on the instructed part, against its intent's definition
     # (planner.intent), checked on the labelled object; None: not held on the part
@@ -230,6 +234,11 @@ def run_task(task: Task) -> Record:
     rec.first_ok = first is not None and verdicts[first.rank] == (True, part)
     best = result.best
     rec.planned = bool(result.success)
+    if result.status == "uncertain":
+        rec.uncertain = True
+        rec.uncertain_held = bool(
+            validate(result.grasp, obj.collision_pieces(), hand, planner.settings.protocol).success
+        )
     rec.held = rec.planned and verdicts[best.rank][0]
     if rec.held:
         rec.part_touched = verdicts[best.rank][1]
@@ -324,6 +333,10 @@ def summarise(records: list[Record]) -> list[dict]:
                     "within_by_seed": _by_seed(rs, "returned_ok"),
                     "stage_median_s": {k: statistics.median(v) for k, v in stages.items()},
                     "errors": sum(bool(r.error) for r in rs),
+                    # uncertain grasps returned (counted neither as held nor within) and how
+                    # many of them held on the full object
+                    "uncertain": sum(r.uncertain for r in rs),
+                    "uncertain_held": sum(r.uncertain_held for r in rs),
                 }
             )
     return rows
@@ -362,6 +375,21 @@ def table(rows: list[dict], max_candidates: int) -> str:
         for r in rows
     )
     return head + body
+
+
+def uncertain_line(rows: list[dict]) -> str:
+    """Below the table: per method and hand, the uncertain grasps returned (PlanResult.status;
+    counted neither as held nor within) and how many held on the object; "" if none."""
+    unsure = [r for r in rows if r.get("uncertain")]
+    if not unsure:
+        return ""
+    counts = ", ".join(
+        f"{r['method']} {r['hand']} {r['uncertain_held']} of {r['uncertain']}" for r in unsure
+    )
+    return (
+        "\nUncertain grasps returned (held on the cloud, slipped on a cloud check; not counted "
+        f"above), held on the object: {counts}\n"
+    )
 
 
 def bars(rows: list[dict], path: Path, title: str) -> None:
@@ -485,6 +513,7 @@ def main(argv: list[str] | None = None) -> int:
     records = [r for k, r in done.items() if k in wanted]
     rows = summarise(records)
     text = table(rows, args.candidates)
+    text += uncertain_line(rows)
     words = "evaluation-only rewordings" if args.paraphrase else "canonical instructions"
     seen = VIEWS[args.view]
     title = (

@@ -357,6 +357,7 @@ class FunctionalPlanner:
             len(proposals), solve, validate, wanted, self.settings, more if later else None
         )
         candidates = scheduled.candidates
+        unsure = least_unsure(candidates, wanted)
         if voter is not None:
             if scheduled.on_part is None and scheduled.fallback is not None:
                 notes.append(
@@ -382,6 +383,14 @@ class FunctionalPlanner:
                     f"{fallback.part}"
                 )
             return PlanResult(instruction, self.hand.name, fallback.grasp, candidates, notes)
+        if unsure is not None:
+            checks = unsure.validation["cloud_checks"]
+            notes.append(
+                "no grasp passed the cloud checks; returning one that held on the cloud's own "
+                f"pieces but on only {checks['held']} of {checks['of']} other piece sets of it: "
+                "it may slip on the real object"
+            )
+            return PlanResult(instruction, self.hand.name, unsure.grasp, candidates, notes)
         return PlanResult(instruction, self.hand.name, None, candidates, notes)
 
     def _intent_program(
@@ -469,6 +478,23 @@ class FunctionalPlanner:
         cand.grasp, cand.success, cand.part = done.grasp, done.success, done.part
         cand.validation = done.validation
         cand.times.update(done.times)
+
+
+def least_unsure(candidates: list[CandidateResult], part: str | None) -> CandidateResult | None:
+    """Of the candidates that held on a bare cloud's own pieces but slipped on a piece variant
+    (CandidateResult.uncertain), the one to return when none held on them all: on the wanted
+    part first, then the most variants held, then the first validated."""
+    unsure = [c for c in candidates if c.uncertain]
+    if not unsure:
+        return None
+    return min(
+        unsure,
+        key=lambda c: (
+            c.part not in (part, None),
+            -c.validation["cloud_checks"]["held"],
+            c.order if c.order is not None else len(candidates),
+        ),
+    )
 
 
 TABLE_GAP = 0.001  # m: the table's top above the object's lowest point (hand 1.5 mm above)

@@ -68,6 +68,13 @@ class CandidateResult:
     def intent_ok(self) -> bool | None:
         return None if self.intent is None else self.intent.ok
 
+    @property
+    def uncertain(self) -> bool:
+        """Held on the bare cloud's own collision pieces but slipped on one of its piece
+        variants (finish_grasp's cloud checks): it may or may not hold on the real object."""
+        checks = None if self.validation is None else self.validation.get("cloud_checks")
+        return not self.success and checks is not None and checks["held"] < checks["of"]
+
     def summary(self) -> dict[str, Any]:
         return {
             "rank": self.rank,
@@ -125,6 +132,15 @@ class PlanResult:
         return self.best is not None and self.best.success
 
     @property
+    def status(self) -> str:
+        """ "holds"; "uncertain": no grasp passed the cloud checks and the returned one held on
+        the bare cloud's own pieces but slipped on a piece variant (CandidateResult.uncertain);
+        "none": no grasp returned."""
+        if self.success:
+            return "holds"
+        return "none" if self.best is None else "uncertain"
+
+    @property
     def holding(self) -> list[CandidateResult]:
         """Every validated candidate that held and touched the instructed part, in validation
         order (the returned grasp first). On an unlabelled object (no part voted) every
@@ -155,6 +171,7 @@ class PlanResult:
             "instruction": self.instruction.text,
             "hand": self.hand,
             "success": self.success,
+            "status": self.status,
             "proposer": self.proposer,
             "understood": self.understood,
             "part_instructed": self.instruction.part,

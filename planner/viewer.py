@@ -54,6 +54,10 @@ def caption(grasp: Grasp) -> str:
     """What a page shows in text: hand, instruction, verdict, part and the phases."""
     m = grasp.metrics
     verdict = {True: "holds", False: "does not hold"}.get(m.get("success"), "not validated")
+    checks = (m.get("validation") or {}).get("cloud_checks")
+    if m.get("success") is False and checks:  # held on the cloud's pieces, not on a variant
+        slipped = checks["of"] - checks["held"]
+        verdict = f"uncertain: held on the cloud, slipped on {slipped} of {checks['of']} checks"
     parts = [grasp.hand, grasp.instruction or "", verdict]
     if m.get("part"):
         parts.append(f"part touched: {m['part']}")

@@ -52,6 +52,20 @@ def test_the_table_gives_first_and_within_per_seed():
     assert "| 50, 0 / 100, 50% |" in benchmark.table(rows, 8)
 
 
+def test_uncertain_grasps_are_counted_apart_from_the_held_ones():
+    def rec(uncertain, held_on_object):
+        r = benchmark.Record("learned", "leap", "mug", 0, "Use a mug by handle", "t", "handle")
+        r.uncertain, r.uncertain_held = uncertain, held_on_object
+        return r
+
+    rows = benchmark.summarise([rec(True, True), rec(True, False), rec(False, False)])
+    assert rows[0]["uncertain"] == 2 and rows[0]["uncertain_held"] == 1
+    assert rows[0]["held"] == 0.0 and rows[0]["within"] == 0.0
+    assert "learned leap 1 of 2" in benchmark.uncertain_line(rows)
+    rows = benchmark.summarise([rec(False, False)])
+    assert benchmark.uncertain_line(rows) == ""
+
+
 def test_the_sample_seed_is_set_by_seeds_not_by_set(tmp_path):
     with pytest.raises(SystemExit, match="--seeds"):
         benchmark.main(["--set", "learned.seed=3", "--out", str(tmp_path)])

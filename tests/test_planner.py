@@ -11,6 +11,7 @@ import signal
 import subprocess
 import sys
 import time
+import types
 
 import numpy as np
 import pytest
@@ -610,3 +611,53 @@ def test_the_planner_benchmark_plans_the_intents_asked_for():
     lifts = pairs("test", 1, ["allegro"], ["Liftup"])
     assert lifts and all(text.startswith("Liftup ") for *_, text in lifts)
     assert lifts == [p for p in every if p[3].startswith("Liftup ")]
+
+
+@pytest.mark.parametrize("holder", [None, 5])
+def test_when_no_grasp_passes_the_cloud_checks_the_least_unsure_is_returned(monkeypatch, holder):
+    """Candidates 1 and 3 held on the cloud's own pieces but slipped on 2 and 1 of its 2 piece
+    variants: with no grasp that held, candidate 3 comes back as "uncertain" (not a success);
+    a grasp that held (candidate 5) is preferred to both."""
+    _fake_solves_and_verdicts(monkeypatch, 0.5, lambda rank: 1 - rank / 100, holder=-1)
+
+    def fake_validate(self, program, obj, instruction, cand):
+        grasp = types.SimpleNamespace(metrics={"squeeze_depth": 1.0, "pregrasp_rule": "fake"})
+        cand.grasp, cand.success, cand.part = grasp, cand.rank == holder, instruction.part
+        held = {1: 0, 3: 1}.get(cand.rank)
+        cand.validation = {} if held is None else {"cloud_checks": {"held": held, "of": 2}}
+
+    monkeypatch.setattr(FunctionalPlanner, "_validate", fake_validate)
+    settings = PlannerSettings(
+        schedule=ScheduleSettings(solve_batch=1, max_candidates=8, sweep_after=None),
+        proposals=ProposalSettings(max_proposals=8),
+        intent=IntentSettings(aware=False),
+    )
+    result = FunctionalPlanner("allegro", settings).plan(
+        make_object("bottle", 1), "Hold a bottle by body"
+    )
+    assert [c.rank for c in result.candidates if c.uncertain] == [1, 3]
+    if holder is None:
+        assert result.status == "uncertain" and not result.success
+        assert result.best.rank == 3 and result.summary()["status"] == "uncertain"
+        assert any("1 of 2 other piece sets" in note for note in result.notes)
+        assert result.holding == []
+    else:
+        assert result.status == "holds" and result.best.rank == holder
+
+
+def test_the_caption_calls_a_grasp_that_slipped_on_a_cloud_check_uncertain():
+    from models.grasp import Grasp
+    from planner.viewer import caption
+
+    grasp = Grasp(
+        hand="allegro",
+        wrist_pos=np.zeros(3),
+        wrist_quat=np.array([1.0, 0, 0, 0]),
+        grasp=np.zeros(16),
+        pregrasp=np.zeros(16),
+        squeeze=np.zeros(16),
+        metrics={"success": False, "validation": {"cloud_checks": {"held": 1, "of": 2}}},
+    )
+    assert "uncertain: held on the cloud, slipped on 1 of 2 checks" in caption(grasp)
+    grasp.metrics["validation"] = {}
+    assert "does not hold" in caption(grasp)

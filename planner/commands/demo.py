@@ -83,10 +83,10 @@ def run(args: argparse.Namespace) -> int:
                 result.grasp.save(out / f"{stem}.json")
                 page = write_html(result.grasp, obj, hand, out / f"{stem}.html").name
             intent = _yes_no(result.intent_ok)
-            row = (hand_name, text, result.success, result.part_touched, intent, elapsed, page)
+            row = (hand_name, text, result.status, result.part_touched, intent, elapsed, page)
             rows.append(row)
             print(
-                f"{hand_name:<8} {text:<24} {'yes' if result.success else 'no':<8} "
+                f"{hand_name:<8} {text:<24} {_holds(result.status):<8} "
                 f"{result.part_touched or '-':<13} {intent:<10} {elapsed:>7.2f}",
                 flush=True,
             )
@@ -94,7 +94,7 @@ def run(args: argparse.Namespace) -> int:
     index = write_text_atomic(
         out / "index.html", _index_page(rows, learned_rows), "demo index page"
     )
-    held = sum(r[2] for r in rows) + sum(r[3] for r in learned_rows)
+    held = sum(r[2] == "holds" for r in rows) + sum(r[3] == "holds" for r in learned_rows)
     total = len(rows) + len(learned_rows)
     print(f"\n{held}/{total} grasps hold; open {index} to see them")
     return 0 if held else 1
@@ -140,13 +140,18 @@ def _learned(hands: list[str], out) -> list[tuple]:
                 text = f'"{sentence}" (read as: {read}) · learned · {caption(result.grasp)}'
                 page = write_html(result.grasp, cloud, hand, out / f"{stem}.html", text).name
             intent = _yes_no(result.intent_ok)
-            rows.append((hand_name, sentence, read, result.success, intent, elapsed, page))
+            rows.append((hand_name, sentence, read, result.status, intent, elapsed, page))
             print(
                 f"{hand_name:<8} {sentence:<34} {read:<28} "
-                f"{'yes' if result.success else 'no':<8} {intent:<10} {elapsed:>7.2f}",
+                f"{_holds(result.status):<8} {intent:<10} {elapsed:>7.2f}",
                 flush=True,
             )
     return rows
+
+
+def _holds(status: str) -> str:
+    """The "holds" column: yes, no, or uncertain (PlanResult.status)."""
+    return {"holds": "yes", "none": "no"}.get(status, status)
 
 
 def _yes_no(flag: bool | None) -> str:
@@ -155,14 +160,14 @@ def _yes_no(flag: bool | None) -> str:
 
 def _index_page(rows, learned_rows=()) -> str:
     body = "".join(
-        f"<tr><td>{html.escape(h)}</td><td>{html.escape(t)}</td><td>{'yes' if ok else 'no'}</td>"
+        f"<tr><td>{html.escape(h)}</td><td>{html.escape(t)}</td><td>{_holds(ok)}</td>"
         f"<td>{html.escape(p or '-')}</td><td>{i}</td><td>{s:.2f}</td>"
         f"<td>{f'<a href={page!r}>view</a>' if page else '-'}</td></tr>"
         for h, t, ok, p, i, s, page in rows
     )
     learned = "".join(
         f"<tr><td>{html.escape(h)}</td><td>{html.escape(t)}</td><td>{html.escape(read)}</td>"
-        f"<td>{'yes' if ok else 'no'}</td><td>{i}</td><td>{s:.2f}</td>"
+        f"<td>{_holds(ok)}</td><td>{i}</td><td>{s:.2f}</td>"
         f"<td>{f'<a href={page!r}>view</a>' if page else '-'}</td></tr>"
         for h, t, read, ok, i, s, page in learned_rows
     )

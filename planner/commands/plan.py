@@ -136,7 +136,11 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def print_summary(result: Any) -> None:
     s = result.summary()
-    status = "holds" if s["success"] else "NO GRASP FOUND"
+    status = {
+        "holds": "holds",
+        "uncertain": "UNCERTAIN (held on the cloud, slipped on a cloud check)",
+        "none": "NO GRASP FOUND",
+    }[s["status"]]
     print(f"{s['hand']}: {s['instruction']}: {status} ({s['proposer']} proposals)")
     read = s["understood"]
     if read is not None and not read["parsed"]:
