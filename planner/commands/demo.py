@@ -63,7 +63,7 @@ def run(args: argparse.Namespace) -> int:
     )
     rows = []
     header = (
-        f"{'hand':<8} {'instruction':<24} {'holds':<8} {'part touched':<13} "
+        f"{'hand':<8} {'instruction':<24} {'holds':<9} {'part touched':<13} "
         f"{'intent met':<10} {'time s':>7}"
     )
     print(header)
@@ -86,7 +86,7 @@ def run(args: argparse.Namespace) -> int:
             row = (hand_name, text, result.status, result.part_touched, intent, elapsed, page)
             rows.append(row)
             print(
-                f"{hand_name:<8} {text:<24} {_holds(result.status):<8} "
+                f"{hand_name:<8} {text:<24} {_holds(result.status):<9} "
                 f"{result.part_touched or '-':<13} {intent:<10} {elapsed:>7.2f}",
                 flush=True,
             )
@@ -117,7 +117,7 @@ def _learned(hands: list[str], out) -> list[tuple]:
         flush=True,
     )
     header = (
-        f"{'hand':<8} {'sentence':<34} {'read as':<28} {'holds':<8} {'intent met':<10} "
+        f"{'hand':<8} {'sentence':<34} {'read as':<28} {'holds':<9} {'intent met':<10} "
         f"{'time s':>7}"
     )
     print(header)
@@ -143,7 +143,7 @@ def _learned(hands: list[str], out) -> list[tuple]:
             rows.append((hand_name, sentence, read, result.status, intent, elapsed, page))
             print(
                 f"{hand_name:<8} {sentence:<34} {read:<28} "
-                f"{_holds(result.status):<8} {intent:<10} {elapsed:>7.2f}",
+                f"{_holds(result.status):<9} {intent:<10} {elapsed:>7.2f}",
                 flush=True,
             )
     return rows
