@@ -18,13 +18,20 @@ from typing import Any
 
 import numpy as np
 import torch
+from scipy.spatial import ConvexHull, QhullError
 
 from models.errors import InstructionError, PlanningError
 from models.grasp import Grasp
 from models.hands import HandModel, load_hand
 from models.objects import Instruction, ObjectModel, parse_instruction
 from models.objects.completion import complete_view
-from models.objects.intents import WRIST_CRITERIA, Definition, label_free, region_checked
+from models.objects.intents import (
+    RULES,
+    WRIST_CRITERIA,
+    Definition,
+    label_free,
+    region_checked,
+)
 from models.reproducible import rounded
 from planner.grasp_program import GraspProgram, GraspTargets, SolveResult, grasp_program
 from planner.intent import (
@@ -32,6 +39,7 @@ from planner.intent import (
     faces_intent,
     intent_definition,
     region_definition,
+    region_points,
 )
 from planner.labels import grasp_part
 from planner.learned_proposer import (
@@ -271,15 +279,15 @@ class FunctionalPlanner:
         part: str | None,
         check_intent: bool,
         proposals: list[Proposal],
-        programs: tuple[GraspProgram, Callable[[], tuple[GraspProgram, float | None]] | None],
+        programs: tuple[GraspProgram, Callable[[], tuple[GraspProgram, int | None]] | None],
         times: dict[str, float],
         voter: ObjectModel | None = None,
         later: Callable[[], list[Proposal]] | None = None,
         intent_region: ObjectModel | None = None,
     ) -> PlanResult:
         """Solve, schedule and validate the proposals (planner.schedule). `programs`: the
-        program, and what makes the program for proposals shaped by the intent with its table
-        top (None: no proposal is shaped), called when a shaped proposal is first solved; `times`
+        program, and what makes the program for proposals shaped by the intent with the count
+        of its pieces that are the object's own (None: no proposal is shaped), called when a shaped proposal is first solved; `times`
         (building and proposing) go to the first candidate. `part` None: any part counts,
         unless `voter` (the region the learned samples point at, `learned.region_vote`) says
         which held grasps count first; the candidates' `part` stays None. `later`: makes the
@@ -289,9 +297,9 @@ class FunctionalPlanner:
         (planner.intent.check_configuration)."""
         notes = []
         program, make_shaped = programs
-        built: list[tuple[GraspProgram, float | None]] = []  # the shaped program, once made
+        built: list[tuple[GraspProgram, int | None]] = []  # the shaped program, once made
 
-        def shaped() -> tuple[GraspProgram, float | None]:
+        def shaped() -> tuple[GraspProgram, int | None]:
             if not built:
                 built.append((program, None) if make_shaped is None else make_shaped())
             return built[0]
@@ -315,8 +323,8 @@ class FunctionalPlanner:
 
         def solve_one(rank: int) -> CandidateResult:
             proposal = proposals[rank]
-            top = shaped()[1] if proposal.shaped else None
-            return self._solve(program_of(rank), obj, rank, proposal, top)
+            own = shaped()[1] if proposal.shaped else None
+            return self._solve(program_of(rank), obj, rank, proposal, own)
 
         def more() -> int:
             t0 = time.perf_counter()
@@ -395,17 +403,20 @@ class FunctionalPlanner:
 
     def _intent_program(
         self, obj: ObjectModel, meaning: Definition
-    ) -> tuple[GraspProgram, float | None]:
+    ) -> tuple[GraspProgram, int | None]:
         """The grasp program for proposals placed for the intent (its `intent.program`
-        settings and, for Liftup, a table under the object: `intent.liftup_table`) and the table's
-        top height (None: no table)."""
+        settings; for Liftup, a table under the object: `intent.liftup_table`; for Use, the
+        working parts' keep-outs: `intent.use_keep_out`) and how many of its pieces are the
+        object's own (None: all of them; the rest are no contact)."""
         changes = {k: v for i, k, v in self.settings.intent.program if i == meaning.intent}
-        pieces, top = list(obj.collision_pieces()), None
+        own = list(obj.collision_pieces())
+        extra = []
         if meaning.intent == "Liftup" and self.settings.intent.liftup_table:
-            table = table_under(obj)
-            pieces.append(table)
-            top = float(table[:, 2].max())
-        return grasp_program(self.hand, pieces, replace(self.settings.program, **changes)), top
+            extra.append(table_under(obj))
+        if meaning.intent == "Use" and meaning.working and self.settings.intent.use_keep_out:
+            extra.extend(keep_out(obj, meaning))
+        program = grasp_program(self.hand, own + extra, replace(self.settings.program, **changes))
+        return program, len(own) if extra else None
 
     def _prepare(self, proposal: Proposal) -> dict[str, float]:
         """Make the proposal's pending D(R,O) targets (learned samples: made when solved, in
@@ -430,10 +441,11 @@ class FunctionalPlanner:
         obj: ObjectModel,
         rank: int,
         proposal: Proposal,
-        table_top: float | None = None,
+        own_pieces: int | None = None,
     ) -> CandidateResult:
         """Solve one proposal (its D(R,O) targets already made: `_prepare`) and score its
-        contacts: epsilon and task quality at the grasp, a Liftup table's contacts left out.
+        contacts: epsilon and task quality at the grasp, on the first `own_pieces` pieces only
+        (the object's; not a Liftup table or a Use keep-out).
         A Drake solve uses no torch, so it may run in a forked process (planner.parallel); the
         ablations' samples (drawn as is, fitted by torch) are solved in this one."""
         if proposal.kind == "direct":
@@ -456,12 +468,8 @@ class FunctionalPlanner:
         cand = CandidateResult(rank, proposal, solved, times={"solve": solved.solve_time})
         if solved.ok:
             t0 = time.perf_counter()
-            points, inward = program.contacts(
-                solved.wrist, solved.q, self.settings.schedule.contact_distance
-            )
-            if table_top is not None:  # the table is no contact with the object
-                on_table = (points[:, 2] <= table_top + 1e-4) & (inward[:, 2] < -0.9)
-                points, inward = points[~on_table], inward[~on_table]
+            distance = self.settings.schedule.contact_distance
+            points, inward = program.contacts(solved.wrist, solved.q, distance, own_pieces)
             quality = contact_quality(points, inward, obj.points.mean(axis=0))
             cand.quality, cand.task_quality = rounded(quality.epsilon), rounded(quality.task)
             cand.times["quality"] = time.perf_counter() - t0
@@ -509,6 +517,28 @@ def table_under(obj: ObjectModel) -> np.ndarray:
     top = low[2] + TABLE_GAP
     corners = np.array([[x, y, z] for x in (-0.3, 0.3) for y in (-0.3, 0.3) for z in (-0.02, 0)])
     return rounded(corners + [cx, cy, top])
+
+
+def keep_out(obj: ObjectModel, meaning: Definition) -> list[np.ndarray]:
+    """Per working part of a Use definition, the corners of its convex hull grown by the
+    working clearance (each hull vertex moved along 26 directions): a collision piece that
+    keeps the whole hand, not only the anchors the proposals place, clear of what the object
+    works with (a cup's opening, a glass's bowl, a knife's blade)."""
+    grow = RULES.use.working_clearance
+    steps = np.array([d for d in np.ndindex(3, 3, 3) if d != (1, 1, 1)], dtype=float) - 1
+    steps *= grow / np.linalg.norm(steps, axis=1, keepdims=True)
+    pieces = []
+    for region in meaning.working:
+        pts = region_points(obj, region)
+        if len(pts) < 4:
+            continue
+        try:
+            corners = pts[ConvexHull(pts).vertices]
+        except QhullError:  # a flat or degenerate region: its points themselves
+            corners = pts
+        grown = (corners[:, None, :] + steps[None]).reshape(-1, 3)
+        pieces.append(rounded(grown[ConvexHull(grown).vertices]))
+    return pieces
 
 
 @dataclass

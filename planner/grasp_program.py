@@ -228,14 +228,16 @@ class GraspProgram:
             plant, scene_graph, filter_self_collisions=False, merge_hull_links=True
         )
         world = plant.world_body()
+        self._piece_index = {}  # geometry id -> its piece's index in `obj.pieces`
         for i, piece in enumerate(self.obj.pieces):
-            plant.RegisterCollisionGeometry(
+            geometry = plant.RegisterCollisionGeometry(
                 world,
                 RigidTransform(),
                 Convex(np.asarray(piece.vertices, dtype=float).T, f"{self.obj.name}_{i}"),
                 f"object_piece_{i}",
                 CoulombFriction(0.6, 0.6),
             )
+            self._piece_index[geometry] = i
         plant.Finalize()
         self.plant: object = plant
         self.scene_graph: SceneGraph = scene_graph
@@ -358,10 +360,12 @@ class GraspProgram:
         return float(min(distances, default=horizon))
 
     def contacts(
-        self, wrist: np.ndarray, q: np.ndarray, threshold: float = 0.003
+        self, wrist: np.ndarray, q: np.ndarray, threshold: float = 0.003, pieces: int | None = None
     ) -> tuple[np.ndarray, np.ndarray]:
         """Object-side points where the hand is within `threshold`, with the normals pointing
-        into the object (the direction the hand can push): one per touching hand geometry."""
+        into the object (the direction the hand can push): one per touching hand geometry.
+        `pieces`: only the first that many pieces are the object (the rest, a table or a
+        keep-out an intent adds, are no contact); None: every piece."""
         points, normals = [], []
         for pair in self._closest_pairs(self.plant_context, wrist, q, threshold):
             a_hand, b_hand = pair.id_A in self._hand_geoms, pair.id_B in self._hand_geoms
@@ -373,6 +377,8 @@ class GraspProgram:
                 if a_hand
                 else (pair.id_A, pair.p_ACa, pair.nhat_BA_W)
             )
+            if pieces is not None and self._piece_index[obj_id] >= pieces:
+                continue
             if not np.all(np.isfinite(n_into)):  # Drake's normal is undefined at exact touch
                 continue
             pose = self._inspector.GetPoseInFrame(obj_id)

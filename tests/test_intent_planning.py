@@ -201,3 +201,44 @@ def test_liftup_anchors_climb_toward_the_palm_as_set(hand_name, knife):
     assert up.mean() > across.mean() + 0.001
     with pytest.raises(PlanningError, match="liftup_toward_palm"):
         IntentSettings(liftup_toward_palm=2.0)
+
+
+def test_use_keep_out_covers_each_working_part_with_the_clearance(knife):
+    """The keep-out of a knife's blade holds every blade point at least most of the working
+    clearance inside its hull (26 growth directions: 0.8 of it at worst), and ends short of
+    the handle's far end."""
+    from scipy.spatial import ConvexHull
+
+    from planner.functional import keep_out
+
+    meaning = definition("knife", "Use", "handle")
+    (piece,) = keep_out(knife, meaning)
+    blade = region_points(knife, meaning.working[0])
+    hull = ConvexHull(piece)
+    inside = -(blade @ hull.equations[:, :3].T + hull.equations[:, 3]).max(axis=1)
+    assert inside.min() >= 0.8 * RULES.use.working_clearance
+    handle = knife.points[knife.point_labels == knife.part_names.index("handle")]
+    depth = -(handle @ hull.equations[:, :3].T + hull.equations[:, 3]).max(axis=1)
+    assert (depth < 0).mean() > 0.5  # most of the handle is outside the keep-out
+
+
+def test_use_grasps_keep_the_whole_hand_clear_of_the_working_parts(hand_name):
+    """With the keep-out every shaped Use candidate that solves has each hand point at least
+    the working clearance (less 1 mm of geometry difference) from a wine glass's bowl, which
+    the anchors alone do not ensure; without it some come closer."""
+    glass = make_object("wine_glass", 4)
+    gaps = {}
+    for keep in (True, False):
+        settings = PlannerSettings(
+            schedule=ScheduleSettings(max_candidates=1),
+            proposals=ProposalSettings(max_proposals=4),
+            intent=IntentSettings(use_keep_out=keep),
+        )
+        result = FunctionalPlanner(hand_name, settings).plan(glass, "Use a wine glass by stem")
+        gaps[keep] = [
+            c.intent["working_parts_clear"].value
+            for c in result.candidates
+            if c.solve.ok and c.proposal.shaped
+        ]
+    assert gaps[True] and min(gaps[True]) >= RULES.use.working_clearance - 0.001
+    assert gaps[False] and min(gaps[False]) < RULES.use.working_clearance
