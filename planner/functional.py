@@ -405,16 +405,16 @@ class FunctionalPlanner:
         self, obj: ObjectModel, meaning: Definition
     ) -> tuple[GraspProgram, int | None]:
         """The grasp program for proposals placed for the intent (its `intent.program`
-        settings; for Liftup, a table under the object: `intent.liftup_table`; for Use, the
-        working parts' keep-outs: `intent.use_keep_out`) and how many of its pieces are the
+        settings; for Liftup, a table under the object: `intent.liftup_table`; for Use and
+        Handover, keep-outs: `keep_out`) and how many of its pieces are the
         object's own (None: all of them; the rest are no contact)."""
         changes = {k: v for i, k, v in self.settings.intent.program if i == meaning.intent}
         own = list(obj.collision_pieces())
         extra = []
         if meaning.intent == "Liftup" and self.settings.intent.liftup_table:
             extra.append(table_under(obj))
-        if meaning.intent == "Use" and meaning.working and self.settings.intent.use_keep_out:
-            extra.extend(keep_out(obj, meaning))
+        keep = self.settings.intent
+        extra.extend(keep_out(obj, meaning, keep.use_keep_out, keep.handover_keep_out))
         program = grasp_program(self.hand, own + extra, replace(self.settings.program, **changes))
         return program, len(own) if extra else None
 
@@ -519,26 +519,56 @@ def table_under(obj: ObjectModel) -> np.ndarray:
     return rounded(corners + [cx, cy, top])
 
 
-def keep_out(obj: ObjectModel, meaning: Definition) -> list[np.ndarray]:
-    """Per working part of a Use definition, the corners of its convex hull grown by the
-    working clearance (each hull vertex moved along 26 directions): a collision piece that
-    keeps the whole hand, not only the anchors the proposals place, clear of what the object
-    works with (a cup's opening, a glass's bowl, a knife's blade)."""
-    grow = RULES.use.working_clearance
-    steps = np.array([d for d in np.ndindex(3, 3, 3) if d != (1, 1, 1)], dtype=float) - 1
-    steps *= grow / np.linalg.norm(steps, axis=1, keepdims=True)
+def keep_out(
+    obj: ObjectModel, meaning: Definition, use: bool = True, handover: bool = True
+) -> list[np.ndarray]:
+    """Collision pieces that keep the whole hand, not only the anchors the proposals place,
+    clear of what the intent leaves free (none on an unlabelled object): for Use (`use`) each
+    working part (a cup's opening, a glass's bowl, a knife's blade) grown by the working
+    clearance; for Handover (`handover`) each other part grown by the other-part clearance,
+    where that leaves at least half of the held part outside (a knife's handle for its
+    blade; not a cup's body, which grown by 2 cm swallows its rim)."""
+    if not obj.labelled:
+        return []
+    if meaning.intent == "Use" and use:
+        regions = [region_points(obj, r) for r in meaning.working]
+        grown = [grown_hull(pts, RULES.use.working_clearance) for pts in regions]
+        return [g for g in grown if g is not None]
+    if meaning.intent != "Handover" or not handover:
+        return []
+    labels = obj.point_labels
+    held = obj.points[labels == obj.part_names.index(meaning.part)]
     pieces = []
-    for region in meaning.working:
-        pts = region_points(obj, region)
-        if len(pts) < 4:
+    for i, name in enumerate(obj.part_names):
+        if name == meaning.part:
             continue
-        try:
-            corners = pts[ConvexHull(pts).vertices]
-        except QhullError:  # a flat or degenerate region: its points themselves
-            corners = pts
-        grown = (corners[:, None, :] + steps[None]).reshape(-1, 3)
-        pieces.append(rounded(grown[ConvexHull(grown).vertices]))
+        hull = grown_hull(obj.points[labels == i], RULES.handover.other_part_clearance)
+        if hull is not None and inside_hull(hull, held).mean() < 0.5:
+            pieces.append(hull)
     return pieces
+
+
+_GROWTH = np.array([d for d in np.ndindex(3, 3, 3) if d != (1, 1, 1)], dtype=float) - 1
+_GROWTH /= np.linalg.norm(_GROWTH, axis=1, keepdims=True)
+
+
+def grown_hull(points: np.ndarray, grow: float) -> np.ndarray | None:
+    """The corners of the points' convex hull grown by `grow` (each hull vertex moved along 26
+    directions: at least 0.8 `grow` everywhere); None for fewer than 4 points."""
+    if len(points) < 4:
+        return None
+    try:
+        corners = points[ConvexHull(points).vertices]
+    except QhullError:  # flat or degenerate: the points themselves
+        corners = points
+    grown = (corners[:, None, :] + grow * _GROWTH[None]).reshape(-1, 3)
+    return rounded(grown[ConvexHull(grown).vertices])
+
+
+def inside_hull(corners: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Mask of the points inside the convex hull of `corners`."""
+    eq = ConvexHull(corners).equations
+    return (points @ eq[:, :3].T + eq[:, 3] <= 0).all(axis=1)
 
 
 @dataclass

@@ -169,6 +169,9 @@ class IntentSettings:
     # piece of the shaped proposals' grasp program (planner.functional.keep_out): the whole
     # hand stays clear of it, not only the anchors
     use_keep_out: bool = True
+    # Handover: each other part's convex hull, grown by the other-part clearance, likewise
+    # (where it leaves at least half the held part outside it)
+    handover_keep_out: bool = True
     # The grasp program's weights per intent (ProgramSettings field -> value), over `program`:
     # Hold pulls the palm onto its target harder (palm contact), Liftup keeps the proposal's
     # palm-down wrist rotation
