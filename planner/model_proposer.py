@@ -246,8 +246,7 @@ class ModelProposer:
 
         if intent.intent == "Use" and intent.working:
             working = np.vstack([region_points(obj, r) for r in intent.working])
-            margin = RULES.use.working_clearance + tip + self.settings.intent.use_margin
-            away = clear_of(working, margin)
+            away = clear_of(working, RULES.use.working_clearance + tip)
             return _Shape(away, shape.frames, shaped_rows=True)
         if intent.intent == "Handover":
             others = obj.points[~mask]

@@ -162,9 +162,6 @@ class IntentSettings:
     # test split (and of the validation split), 21 (18) met Liftup at 0.5, 27 (29) at 0 and
     # 29 (30) at -0.5; 0.25 and -1 gave 25 and 26 on test (docs/intent_log.md).
     liftup_toward_palm: float = -0.5
-    # Use: anchors this much (m) farther from the working parts than the working clearance
-    # plus a fingertip's width (the rest of the finger and hand reach beyond the anchor)
-    use_margin: float = 0.0
     # Use: each working part's convex hull, grown by the working clearance, is a collision
     # piece of the shaped proposals' grasp program (planner.functional.keep_out): the whole
     # hand stays clear of it, not only the anchors

@@ -242,3 +242,22 @@ def test_use_grasps_keep_the_whole_hand_clear_of_the_working_parts(hand_name):
         ]
     assert gaps[True] and min(gaps[True]) >= RULES.use.working_clearance - 0.001
     assert gaps[False] and min(gaps[False]) < RULES.use.working_clearance
+
+
+def test_handover_keep_out_grows_the_other_parts_where_the_held_part_stays_outside(knife):
+    """A knife handed over by its blade gets its handle grown by 2 cm as a keep-out, holding
+    every handle point that deep inside and leaving most of the blade out; a cup's body grown
+    by 2 cm would swallow its rim, so a cup handed over by the rim gets none."""
+    from scipy.spatial import ConvexHull
+
+    from planner.functional import inside_hull, keep_out
+
+    (piece,) = keep_out(knife, definition("knife", "Handover", "blade"))
+    handle = knife.points[knife.point_labels == knife.part_names.index("handle")]
+    blade = knife.points[knife.point_labels == knife.part_names.index("blade")]
+    eq = ConvexHull(piece).equations
+    depth = -(handle @ eq[:, :3].T + eq[:, 3]).max(axis=1)
+    assert depth.min() >= 0.8 * RULES.handover.other_part_clearance
+    assert inside_hull(piece, blade).mean() < 0.5
+    assert keep_out(make_object("cup", 0), definition("cup", "Handover", "rim")) == []
+    assert keep_out(knife, definition("knife", "Handover", "blade"), handover=False) == []
