@@ -18,20 +18,13 @@ from typing import Any
 
 import numpy as np
 import torch
-from scipy.spatial import ConvexHull, QhullError
 
 from models.errors import InstructionError, PlanningError
 from models.grasp import Grasp
 from models.hands import HandModel, load_hand
 from models.objects import Instruction, ObjectModel, parse_instruction
 from models.objects.completion import complete_view
-from models.objects.intents import (
-    RULES,
-    WRIST_CRITERIA,
-    Definition,
-    label_free,
-    region_checked,
-)
+from models.objects.intents import WRIST_CRITERIA, Definition, label_free, region_checked
 from models.reproducible import rounded
 from planner.grasp_program import GraspProgram, GraspTargets, SolveResult, grasp_program
 from planner.intent import (
@@ -39,8 +32,8 @@ from planner.intent import (
     faces_intent,
     intent_definition,
     region_definition,
-    region_points,
 )
+from planner.intent_pieces import keep_out, table_under
 from planner.labels import grasp_part
 from planner.learned_proposer import (
     REGION_PART,
@@ -63,7 +56,6 @@ from planner.validation import validate
 
 __all__ = [
     "PROPOSERS",
-    "TABLE_GAP",
     "CandidateResult",
     "FunctionalPlanner",
     "HandGeometry",
@@ -71,7 +63,6 @@ __all__ = [
     "PlannerSettings",
     "Proposal",
     "finish_grasp",
-    "table_under",
 ]
 
 
@@ -287,8 +278,9 @@ class FunctionalPlanner:
     ) -> PlanResult:
         """Solve, schedule and validate the proposals (planner.schedule). `programs`: the
         program, and what makes the program for proposals shaped by the intent with the count
-        of its pieces that are the object's own (None: no proposal is shaped), called when a shaped proposal is first solved; `times`
-        (building and proposing) go to the first candidate. `part` None: any part counts,
+        of its pieces that are the object's own (None: no proposal is shaped), called when a
+        shaped proposal is first solved; `times` (building and proposing) go to the first
+        candidate. `part` None: any part counts,
         unless `voter` (the region the learned samples point at, `learned.region_vote`) says
         which held grasps count first; the candidates' `part` stays None. `later`: makes the
         proposals that follow these, if the search reaches them (planner.schedule `more`);
@@ -406,7 +398,7 @@ class FunctionalPlanner:
     ) -> tuple[GraspProgram, int | None]:
         """The grasp program for proposals placed for the intent (its `intent.program`
         settings; for Liftup, a table under the object: `intent.liftup_table`; for Use and
-        Handover, keep-outs: `keep_out`) and how many of its pieces are the
+        Handover, keep-outs: planner.intent_pieces.keep_out) and how many of its pieces are the
         object's own (None: all of them; the rest are no contact)."""
         changes = {k: v for i, k, v in self.settings.intent.program if i == meaning.intent}
         own = list(obj.collision_pieces())
@@ -445,7 +437,7 @@ class FunctionalPlanner:
     ) -> CandidateResult:
         """Solve one proposal (its D(R,O) targets already made: `_prepare`) and score its
         contacts: epsilon and task quality at the grasp, on the first `own_pieces` pieces only
-        (the object's; not a Liftup table or a Use keep-out).
+        (the object's; not a Liftup table or a keep-out: planner.intent_pieces).
         A Drake solve uses no torch, so it may run in a forked process (planner.parallel); the
         ablations' samples (drawn as is, fitted by torch) are solved in this one."""
         if proposal.kind == "direct":
@@ -503,72 +495,6 @@ def least_unsure(candidates: list[CandidateResult], part: str | None) -> Candida
             c.order if c.order is not None else len(candidates),
         ),
     )
-
-
-TABLE_GAP = 0.001  # m: the table's top above the object's lowest point (hand 1.5 mm above)
-
-
-def table_under(obj: ObjectModel) -> np.ndarray:
-    """The 8 corners of a 60 x 60 x 2 cm slab whose top is `TABLE_GAP` above the object's
-    lowest point, centred under it: a collision piece for Liftup's grasp program."""
-    src = obj.mesh.vertices if obj.mesh is not None else obj.points  # as planner.intent
-    low, high = src.min(axis=0), src.max(axis=0)
-    cx, cy = (low[:2] + high[:2]) / 2
-    top = low[2] + TABLE_GAP
-    corners = np.array([[x, y, z] for x in (-0.3, 0.3) for y in (-0.3, 0.3) for z in (-0.02, 0)])
-    return rounded(corners + [cx, cy, top])
-
-
-def keep_out(
-    obj: ObjectModel, meaning: Definition, use: bool = True, handover: bool = True
-) -> list[np.ndarray]:
-    """Collision pieces that keep the whole hand, not only the anchors the proposals place,
-    clear of what the intent leaves free (none on an unlabelled object): for Use (`use`) each
-    working part (a cup's opening, a glass's bowl, a knife's blade) grown by the working
-    clearance; for Handover (`handover`) each other part grown by the other-part clearance,
-    where that leaves at least half of the held part outside (a knife's handle for its
-    blade; not a cup's body, which grown by 2 cm swallows its rim)."""
-    if not obj.labelled:
-        return []
-    if meaning.intent == "Use" and use:
-        regions = [region_points(obj, r) for r in meaning.working]
-        grown = [grown_hull(pts, RULES.use.working_clearance) for pts in regions]
-        return [g for g in grown if g is not None]
-    if meaning.intent != "Handover" or not handover:
-        return []
-    labels = obj.point_labels
-    held = obj.points[labels == obj.part_names.index(meaning.part)]
-    pieces = []
-    for i, name in enumerate(obj.part_names):
-        if name == meaning.part:
-            continue
-        hull = grown_hull(obj.points[labels == i], RULES.handover.other_part_clearance)
-        if hull is not None and inside_hull(hull, held).mean() < 0.5:
-            pieces.append(hull)
-    return pieces
-
-
-_GROWTH = np.array([d for d in np.ndindex(3, 3, 3) if d != (1, 1, 1)], dtype=float) - 1
-_GROWTH /= np.linalg.norm(_GROWTH, axis=1, keepdims=True)
-
-
-def grown_hull(points: np.ndarray, grow: float) -> np.ndarray | None:
-    """The corners of the points' convex hull grown by `grow` (each hull vertex moved along 26
-    directions: at least 0.8 `grow` everywhere); None for fewer than 4 points."""
-    if len(points) < 4:
-        return None
-    try:
-        corners = points[ConvexHull(points).vertices]
-    except QhullError:  # flat or degenerate: the points themselves
-        corners = points
-    grown = (corners[:, None, :] + grow * _GROWTH[None]).reshape(-1, 3)
-    return rounded(grown[ConvexHull(grown).vertices])
-
-
-def inside_hull(corners: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """Mask of the points inside the convex hull of `corners`."""
-    eq = ConvexHull(corners).equations
-    return (points @ eq[:, :3].T + eq[:, 3] <= 0).all(axis=1)
 
 
 @dataclass

@@ -163,7 +163,7 @@ class IntentSettings:
     # 29 (30) at -0.5; 0.25 and -1 gave 25 and 26 on test (docs/intent_log.md).
     liftup_toward_palm: float = -0.5
     # Use: each working part's convex hull, grown by the working clearance, is a collision
-    # piece of the shaped proposals' grasp program (planner.functional.keep_out): the whole
+    # piece of the shaped proposals' grasp program (planner.intent_pieces.keep_out): the whole
     # hand stays clear of it, not only the anchors
     use_keep_out: bool = True
     # Handover: each other part's convex hull, grown by the other-part clearance, likewise

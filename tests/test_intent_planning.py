@@ -172,7 +172,7 @@ def test_an_off_intent_grasp_is_returned_with_a_note_when_nothing_else_holds(mon
 
 
 def test_liftup_plans_the_shaped_proposals_above_a_table(knife):
-    from planner.functional import TABLE_GAP, table_under
+    from planner.intent_pieces import TABLE_GAP, table_under
 
     slab = table_under(knife)
     bottom = knife.mesh.vertices[:, 2].min()
@@ -209,7 +209,7 @@ def test_use_keep_out_covers_each_working_part_with_the_clearance(knife):
     the handle's far end."""
     from scipy.spatial import ConvexHull
 
-    from planner.functional import keep_out
+    from planner.intent_pieces import keep_out
 
     meaning = definition("knife", "Use", "handle")
     (piece,) = keep_out(knife, meaning)
@@ -250,7 +250,7 @@ def test_handover_keep_out_grows_the_other_parts_where_the_held_part_stays_outsi
     by 2 cm would swallow its rim, so a cup handed over by the rim gets none."""
     from scipy.spatial import ConvexHull
 
-    from planner.functional import inside_hull, keep_out
+    from planner.intent_pieces import inside_hull, keep_out
 
     (piece,) = keep_out(knife, definition("knife", "Handover", "blade"))
     handle = knife.points[knife.point_labels == knife.part_names.index("handle")]

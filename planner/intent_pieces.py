@@ -1,0 +1,78 @@
+"""Collision pieces an instruction's intent adds to the grasp program of the proposals shaped
+for it: Liftup's table under the object, Use's and Handover's keep-outs around what the hand
+must leave free. None of them is a contact (GraspProgram.contacts(pieces=...))."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import ConvexHull, QhullError
+
+from models.objects import ObjectModel
+from models.objects.intents import RULES, Definition
+from models.reproducible import rounded
+from planner.intent import region_points
+
+TABLE_GAP = 0.001  # m: the table's top above the object's lowest point (hand 1.5 mm above)
+
+
+def table_under(obj: ObjectModel) -> np.ndarray:
+    """The 8 corners of a 60 x 60 x 2 cm slab whose top is `TABLE_GAP` above the object's
+    lowest point, centred under it: a collision piece for Liftup's grasp program."""
+    src = obj.mesh.vertices if obj.mesh is not None else obj.points  # as planner.intent
+    low, high = src.min(axis=0), src.max(axis=0)
+    cx, cy = (low[:2] + high[:2]) / 2
+    top = low[2] + TABLE_GAP
+    corners = np.array([[x, y, z] for x in (-0.3, 0.3) for y in (-0.3, 0.3) for z in (-0.02, 0)])
+    return rounded(corners + [cx, cy, top])
+
+
+def keep_out(
+    obj: ObjectModel, meaning: Definition, use: bool = True, handover: bool = True
+) -> list[np.ndarray]:
+    """Collision pieces that keep the whole hand, not only the anchors the proposals place,
+    clear of what the intent leaves free (none on an unlabelled object): for Use (`use`) each
+    working part (a cup's opening, a glass's bowl, a knife's blade) grown by the working
+    clearance; for Handover (`handover`) each other part grown by the other-part clearance,
+    where that leaves at least half of the held part outside (a knife's handle for its
+    blade; not a cup's body, which grown by 2 cm swallows its rim)."""
+    if not obj.labelled:
+        return []
+    if meaning.intent == "Use" and use:
+        regions = [region_points(obj, r) for r in meaning.working]
+        grown = [grown_hull(pts, RULES.use.working_clearance) for pts in regions]
+        return [g for g in grown if g is not None]
+    if meaning.intent != "Handover" or not handover:
+        return []
+    labels = obj.point_labels
+    held = obj.points[labels == obj.part_names.index(meaning.part)]
+    pieces = []
+    for i, name in enumerate(obj.part_names):
+        if name == meaning.part:
+            continue
+        hull = grown_hull(obj.points[labels == i], RULES.handover.other_part_clearance)
+        if hull is not None and inside_hull(hull, held).mean() < 0.5:
+            pieces.append(hull)
+    return pieces
+
+
+_GROWTH = np.array([d for d in np.ndindex(3, 3, 3) if d != (1, 1, 1)], dtype=float) - 1
+_GROWTH /= np.linalg.norm(_GROWTH, axis=1, keepdims=True)
+
+
+def grown_hull(points: np.ndarray, grow: float) -> np.ndarray | None:
+    """The corners of the points' convex hull grown by `grow` (each hull vertex moved along 26
+    directions: at least 0.8 `grow` everywhere); None for fewer than 4 points."""
+    if len(points) < 4:
+        return None
+    try:
+        corners = points[ConvexHull(points).vertices]
+    except QhullError:  # flat or degenerate: the points themselves
+        corners = points
+    grown = (corners[:, None, :] + grow * _GROWTH[None]).reshape(-1, 3)
+    return rounded(grown[ConvexHull(grown).vertices])
+
+
+def inside_hull(corners: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Mask of the points inside the convex hull of `corners`."""
+    eq = ConvexHull(corners).equations
+    return (points @ eq[:, :3].T + eq[:, 3] <= 0).all(axis=1)
