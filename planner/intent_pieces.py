@@ -34,7 +34,8 @@ def keep_out(
     working part (a cup's opening, a glass's bowl, a knife's blade) grown by the working
     clearance; for Handover (`handover`) each other part grown by the other-part clearance,
     where that leaves at least half of the held part outside (a knife's handle for its
-    blade; not a cup's body, which grown by 2 cm swallows its rim)."""
+    blade; not a cup's body, which grown by 2 cm swallows its rim), and none where together
+    they leave less than half of it (a bottle's neck between its body and cap)."""
     if not obj.labelled:
         return []
     if meaning.intent == "Use" and use:
@@ -45,14 +46,18 @@ def keep_out(
         return []
     labels = obj.point_labels
     held = obj.points[labels == obj.part_names.index(meaning.part)]
-    pieces = []
+    pieces, covered = [], np.zeros(len(held), dtype=bool)
     for i, name in enumerate(obj.part_names):
         if name == meaning.part:
             continue
         hull = grown_hull(obj.points[labels == i], RULES.handover.other_part_clearance)
-        if hull is not None and inside_hull(hull, held).mean() < 0.5:
+        inside = None if hull is None else inside_hull(hull, held)
+        if inside is not None and inside.mean() < 0.5:
             pieces.append(hull)
-    return pieces
+            covered |= inside
+    # no room left on the held part between them (a bottle's neck between its body and cap):
+    # the solves could not meet them, only spend SNOPT's iterations trying
+    return pieces if covered.mean() < 0.5 else []
 
 
 _GROWTH = np.array([d for d in np.ndindex(3, 3, 3) if d != (1, 1, 1)], dtype=float) - 1

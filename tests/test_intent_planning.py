@@ -260,4 +260,6 @@ def test_handover_keep_out_grows_the_other_parts_where_the_held_part_stays_outsi
     assert depth.min() >= 0.8 * RULES.handover.other_part_clearance
     assert inside_hull(piece, blade).mean() < 0.5
     assert keep_out(make_object("cup", 0), definition("cup", "Handover", "rim")) == []
+    # a bottle's body and cap, each grown by 2 cm, cover most of its neck between them
+    assert keep_out(make_object("bottle", 0), definition("bottle", "Handover", "neck")) == []
     assert keep_out(knife, definition("knife", "Handover", "blade"), handover=False) == []
