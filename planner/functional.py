@@ -384,7 +384,7 @@ class FunctionalPlanner:
                 )
             return PlanResult(instruction, self.hand.name, fallback.grasp, candidates, notes)
         if unsure is not None:
-            checks = unsure.validation["cloud_checks"]
+            checks = unsure.cloud_checks
             notes.append(
                 "no grasp passed the cloud checks; returning one that held on the cloud's own "
                 f"pieces but on only {checks['held']} of {checks['of']} other piece sets of it: "
@@ -405,8 +405,8 @@ class FunctionalPlanner:
         extra = []
         if meaning.intent == "Liftup" and self.settings.intent.liftup_table:
             extra.append(table_under(obj))
-        keep = self.settings.intent
-        extra.extend(keep_out(obj, meaning, keep.use_keep_out, keep.handover_keep_out))
+        intent = self.settings.intent
+        extra.extend(keep_out(obj, meaning, intent.use_keep_out, intent.handover_keep_out))
         program = grasp_program(self.hand, own + extra, replace(self.settings.program, **changes))
         return program, len(own) if extra else None
 
@@ -491,7 +491,7 @@ def least_unsure(candidates: list[CandidateResult], part: str | None) -> Candida
         unsure,
         key=lambda c: (
             c.part not in (part, None),
-            -c.validation["cloud_checks"]["held"],
+            -c.cloud_checks["held"],
             c.order if c.order is not None else len(candidates),
         ),
     )

@@ -19,6 +19,14 @@ from planner.grasp_program import SolveResult
 from planner.intent import IntentCheck
 
 
+def is_uncertain(success: bool | None, validation: dict[str, Any] | None) -> bool:
+    """A grasp that held on a bare cloud's own collision pieces but slipped on one of its
+    piece variants (finish_grasp's cloud checks): it may or may not hold on the real object.
+    From a candidate's verdict or a grasp's `metrics["success"]` and `["validation"]`."""
+    checks = None if validation is None else validation.get("cloud_checks")
+    return success is False and checks is not None and checks["held"] < checks["of"]
+
+
 @dataclass
 class Proposal:
     wrist: np.ndarray  # [x, y, z, qw, qx, qy, qz]
@@ -69,11 +77,14 @@ class CandidateResult:
         return None if self.intent is None else self.intent.ok
 
     @property
+    def cloud_checks(self) -> dict[str, int] | None:
+        """{"held", "of"}: the piece variants a bare cloud's grasp that held was checked on
+        (finish_grasp); None: not checked."""
+        return None if self.validation is None else self.validation.get("cloud_checks")
+
+    @property
     def uncertain(self) -> bool:
-        """Held on the bare cloud's own collision pieces but slipped on one of its piece
-        variants (finish_grasp's cloud checks): it may or may not hold on the real object."""
-        checks = None if self.validation is None else self.validation.get("cloud_checks")
-        return not self.success and checks is not None and checks["held"] < checks["of"]
+        return is_uncertain(self.success, self.validation)
 
     def summary(self) -> dict[str, Any]:
         return {
@@ -93,9 +104,7 @@ class CandidateResult:
             "task_quality": self.task_quality,
             "validated_as": self.order,
             # held of the piece variants checked (a bare cloud's grasp that held), else None
-            "cloud_checks": None
-            if self.validation is None
-            else self.validation.get("cloud_checks"),
+            "cloud_checks": self.cloud_checks,
             "pregrasp_penetration_mm": (
                 None if self.validation is None else 1000 * self.validation["pregrasp_penetration"]
             ),

@@ -24,6 +24,7 @@ from pydrake.perception import PointCloud
 from models.grasp import Grasp
 from models.hands import HandModel
 from models.objects import ObjectModel
+from planner.results import is_uncertain
 
 PART_COLOURS = [
     (0.90, 0.45, 0.10),
@@ -54,8 +55,8 @@ def caption(grasp: Grasp) -> str:
     """What a page shows in text: hand, instruction, verdict, part and the phases."""
     m = grasp.metrics
     verdict = {True: "holds", False: "does not hold"}.get(m.get("success"), "not validated")
-    checks = (m.get("validation") or {}).get("cloud_checks")
-    if m.get("success") is False and checks:  # held on the cloud's pieces, not on a variant
+    if is_uncertain(m.get("success"), m.get("validation")):
+        checks = m["validation"]["cloud_checks"]
         slipped = checks["of"] - checks["held"]
         verdict = f"uncertain: held on the cloud, slipped on {slipped} of {checks['of']} checks"
     parts = [grasp.hand, grasp.instruction or "", verdict]
