@@ -567,8 +567,8 @@ def finish_grasp(
         t4 = time.perf_counter()
         variants = obj.piece_variants(cloud_checks)
         held = [validate(grasp, variant, hand, protocol).success for variant in variants]
-        times["cloud_checks"] = time.perf_counter() - t4
-        if variants:
+        if variants:  # a mesh has none: no stage to report
+            times["cloud_checks"] = time.perf_counter() - t4
             checked = {"held": int(sum(held)), "of": len(held)}
             if not all(held):
                 result.success, result.reason = False, "slipped on other pieces of the cloud"
