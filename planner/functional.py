@@ -46,6 +46,7 @@ from planner.learned_proposer import (
     region_object,
     sample_start,
 )
+from planner.model_labels import model_labels
 from planner.model_proposer import HandGeometry, ModelProposer
 from planner.parallel import forked_map, processes
 from planner.quality import contact_quality
@@ -178,6 +179,24 @@ class FunctionalPlanner:
             region = region_object(obj, drawn.anchors)
             if region is not None:
                 checked, meaning = True, region_definition(region, instruction)
+        # Use and Handover need the other parts: the interaction model's labels stand in
+        labels = None
+        needs_parts = not (label_free(instruction.intent) or region_checked(instruction.intent))
+        if s.intent.aware and not known and needs_parts and not direct and s.learned.model_labels:
+            t0 = time.perf_counter()
+            labels = model_labels(
+                obj,
+                instruction,
+                self.hand,
+                drawn.anchors,
+                s.learned.seed,
+                s.learned.interaction_weights,
+                s.learned.sample_steps,
+            )
+            drawn.times["labels"] = time.perf_counter() - t0
+            if labels is not None:
+                checked, meaning = True, labels.meaning
+        kept_out = labels is not None and s.learned.sample_keep_outs
         proposals = []
         for i in range(len(drawn.wrists)):
             wrist, anchors = rounded(drawn.wrists[i]), rounded(drawn.anchors[i])
@@ -210,9 +229,8 @@ class FunctionalPlanner:
                     pending_targets=pending,
                     # direct samples are not solved: the intent's program would only add its
                     # table to their measured distance
-                    shaped=facing
-                    and not direct
-                    and faces_intent(wrist, obj, self.hand, instruction),
+                    shaped=kept_out
+                    or (facing and not direct and faces_intent(wrist, obj, self.hand, instruction)),
                 )
             )
         # facing samples first, then best anchor closure; stable: sample order breaks ties
@@ -225,12 +243,17 @@ class FunctionalPlanner:
             shape = meaning
         later = None
         if s.learned.region_proposals > 0 and s.learned.solver == "drake" and not direct:
-            later = partial(self._region_proposals, obj, drawn.anchors, shape)
-        region_shaped = later is not None and shape is not None
+            if labels is not None:  # the model-based proposer on the part as labelled
+                later = partial(self._labelled_proposals, labels.obj, instruction.part, meaning)
+            else:
+                later = partial(self._region_proposals, obj, drawn.anchors, shape)
+        region_shaped = later is not None and (shape is not None or labels is not None)
         shaped = None
         if any(p.shaped for p in proposals) or region_shaped:
-            shaped = partial(self._intent_program, obj, meaning)
-        times = {"build": time.perf_counter() - start - drawn_time, **drawn.times}
+            on = None if labels is None else labels.obj
+            shaped = partial(self._intent_program, obj, meaning, on)
+        elapsed = time.perf_counter() - start - drawn_time - drawn.times.get("labels", 0.0)
+        times = {"build": elapsed, **drawn.times}
         voter = None
         if part is None and s.learned.region_vote > 0 and not direct:
             voter = region_object(obj, drawn.anchors, s.learned.region_vote, 1)
@@ -245,8 +268,11 @@ class FunctionalPlanner:
             voter,
             later,
             region,
+            None if labels is None else labels.obj,
         )
         result.understood = understood.to_dict()
+        if labels is not None:
+            result.understood["model_labels"] = labels.seeds
         result.proposer = "direct" if direct else "learned"
         return result
 
@@ -263,6 +289,15 @@ class FunctionalPlanner:
         found = self.propose(region, REGION_PART, shape)
         return found[: self.settings.learned.region_proposals]
 
+    def _labelled_proposals(
+        self, labelled: ObjectModel, part: str, meaning: Definition
+    ) -> list[Proposal]:
+        """The model-based proposer's proposals on the part of the object as the interaction
+        model labelled it (planner.model_labels), shaped by the intent measured there; best
+        `learned.region_proposals` of them."""
+        found = self.propose(labelled, part, meaning)
+        return found[: self.settings.learned.region_proposals]
+
     def _run(
         self,
         obj: ObjectModel,
@@ -275,6 +310,7 @@ class FunctionalPlanner:
         voter: ObjectModel | None = None,
         later: Callable[[], list[Proposal]] | None = None,
         intent_region: ObjectModel | None = None,
+        intent_object: ObjectModel | None = None,
     ) -> PlanResult:
         """Solve, schedule and validate the proposals (planner.schedule). `programs`: the
         program, and what makes the program for proposals shaped by the intent with the count
@@ -286,7 +322,8 @@ class FunctionalPlanner:
         proposals that follow these, if the search reaches them (planner.schedule `more`);
         the time it takes goes to the last candidate solved before, as stage "region".
         `intent_region`: the intent is checked with it standing in for the part
-        (planner.intent.check_configuration)."""
+        (planner.intent.check_configuration); `intent_object`: checked on it instead of `obj`
+        (the same points, labelled by the interaction model: planner.model_labels)."""
         notes = []
         program, make_shaped = programs
         built: list[tuple[GraspProgram, int | None]] = []  # the shaped program, once made
@@ -339,7 +376,7 @@ class FunctionalPlanner:
                 cand.intent = check_configuration(
                     cand.solve.wrist,
                     cand.solve.q,
-                    obj,
+                    obj if intent_object is None else intent_object,
                     self.hand,
                     instruction,
                     region=intent_region,
@@ -394,19 +431,21 @@ class FunctionalPlanner:
         return PlanResult(instruction, self.hand.name, None, candidates, notes)
 
     def _intent_program(
-        self, obj: ObjectModel, meaning: Definition
+        self, obj: ObjectModel, meaning: Definition, labelled: ObjectModel | None = None
     ) -> tuple[GraspProgram, int | None]:
         """The grasp program for proposals placed for the intent (its `intent.program`
         settings; for Liftup, a table under the object: `intent.liftup_table`; for Use and
-        Handover, keep-outs: planner.intent_pieces.keep_out) and how many of its pieces are the
-        object's own (None: all of them; the rest are no contact)."""
+        Handover, keep-outs: planner.intent_pieces.keep_out, from `labelled` where the labels
+        are the interaction model's) and how many of its pieces are the object's own (None:
+        all of them; the rest are no contact)."""
         changes = {k: v for i, k, v in self.settings.intent.program if i == meaning.intent}
         own = list(obj.collision_pieces())
         extra = []
         if meaning.intent == "Liftup" and self.settings.intent.liftup_table:
             extra.append(table_under(obj))
         intent = self.settings.intent
-        extra.extend(keep_out(obj, meaning, intent.use_keep_out, intent.handover_keep_out))
+        parts = obj if labelled is None else labelled
+        extra.extend(keep_out(parts, meaning, intent.use_keep_out, intent.handover_keep_out))
         program = grasp_program(self.hand, own + extra, replace(self.settings.program, **changes))
         return program, len(own) if extra else None
 

@@ -238,6 +238,13 @@ class LearnedSettings:
     # the instructed part within 8 validations 92/80/86% at 2 cm and at 1 cm against 90/80/84%
     # off (one pair each for Allegro and Shadow; docs/learned_log.md): off until it does more.
     region_vote: float = 0.0
+    # Use and Handover on an object without labels: the cloud's parts found by asking the
+    # interaction model for each part of the understood category (planner.model_labels), so
+    # candidates meeting the intent are preferred and the region proposals are the
+    # model-based proposer's on the labelled part, shaped by the intent (keep-outs included)
+    model_labels: bool = True
+    # with model_labels: the samples too are solved with the intent's keep-outs
+    sample_keep_outs: bool = False
 
     def __post_init__(self) -> None:
         if self.solver not in LEARNED_SOLVERS:
