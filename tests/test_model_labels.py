@@ -1,0 +1,105 @@
+"""Part labels asked of the interaction model, and Use / Handover checked with them on clouds."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+from learned.interaction import load_model
+from models.hands import load_hand
+from models.objects import load_object, make_object, parse_instruction
+from planner.functional import FunctionalPlanner, PlannerSettings
+from planner.intent_pieces import grown_hull, inside_hull
+from planner.model_labels import model_labels, part_texts
+from planner.settings import LearnedSettings, ScheduleSettings
+
+
+def test_each_part_is_asked_for_with_a_table_instruction_of_the_same_intent_where_there_is_one():
+    texts = part_texts(parse_instruction("Use a knife by handle"))
+    assert texts == {"blade": "Handover a knife by blade", "handle": "Use a knife by handle"}
+    pen = part_texts(parse_instruction("Handover a pen by cap"))
+    assert pen["tip"] is None and pen["cap"] == "Handover a pen by cap"
+
+
+def _labels(hand_name: str, category: str, text: str, seed: int = 3):
+    obj = make_object(category, seed)
+    cloud = load_object(obj.sample_cloud(4096, seed=1).points)
+    hand = load_hand(hand_name)
+    _, anchors = load_model(None).sample(cloud.points, text, hand, 16, seed=0)
+    found = model_labels(cloud, parse_instruction(text), hand, anchors)
+    true = obj.point_labels[cKDTree(obj.points).query(cloud.points)[1]]
+    return obj, cloud, found, true
+
+
+@pytest.mark.parametrize("hand_name", ["allegro", "leap", "shadow"])
+def test_a_bare_knife_cloud_is_labelled_as_its_parts(hand_name):
+    """The shipped interaction model finds a knife's blade and handle on a bare cloud: most
+    points get their true part, and the definition measured on them is the knife's."""
+    obj, cloud, found, true = _labels(hand_name, "knife", "Use a knife by handle")
+    assert found is not None
+    assert found.obj.part_names == obj.part_names
+    assert (found.obj.point_labels == true).mean() > 0.8
+    assert [r.part for r in found.meaning.working] == ["blade"]
+    assert found.seeds["blade"] > 0 and found.seeds["handle"] > 0
+
+
+def test_no_labels_where_a_measured_part_is_named_by_no_instruction():
+    """A pen's Use keeps its tip clear, and no instruction asks for the tip: no labels (the
+    plan goes on without the Use check) rather than a definition on a part never found."""
+    *_, found, _ = _labels("allegro", "pen", "Use a pen by barrel")
+    assert found is None
+
+
+def test_no_labels_outside_the_library():
+    cloud = load_object(make_object("mug", 3).sample_cloud(2048).points)
+    hand = load_hand("allegro")
+    instruction = parse_instruction("Use a widget by handle")
+    assert model_labels(cloud, instruction, hand, np.zeros((4, 4, 3))) is None
+
+
+@pytest.mark.slow
+def test_use_on_a_bare_cloud_is_checked_and_kept_out_on_the_models_labels():
+    """On a bare knife cloud "Use a knife by handle" is checked on every solved candidate with
+    the model's labels, and the samples solved with the keep-outs (`sample_keep_outs`) keep
+    every solved hand clear of the blade as labelled; with `model_labels` off nothing is
+    checked."""
+    cloud = load_object(make_object("knife", 3).sample_cloud(4096, seed=1).points)
+
+    def planned(labels: bool, keep_outs: bool):
+        settings = PlannerSettings(
+            schedule=ScheduleSettings(max_candidates=1),
+            learned=LearnedSettings(samples=4, model_labels=labels, sample_keep_outs=keep_outs),
+        )
+        planner = FunctionalPlanner("allegro", settings)
+        planner._validate = lambda program, obj, instruction, cand: None  # solves only
+        return planner, planner.plan(cloud, "Use a knife by handle")
+
+    planner, result = planned(True, True)
+    assert set(result.understood["model_labels"]) == {"blade", "handle"}
+    solved = [c for c in result.candidates if c.solve.ok]
+    assert solved and all(c.proposal.shaped for c in result.candidates)
+    for c in solved:
+        assert c.intent is not None and c.intent.intent == "Use"
+        assert [x.name for x in c.intent.criteria] == ["working_parts_clear"]
+    _, plain = planned(False, False)
+    assert "model_labels" not in plain.understood
+    assert all(c.intent is None for c in plain.candidates)
+
+
+def test_the_keep_out_comes_from_the_models_labels():
+    """The shaped program's extra piece is the labelled blade grown by the clearance: it holds
+    most of the true blade, and of the true handle not much more than the true blade's grown
+    hull does (the handle's end beside the blade is within the clearance)."""
+    obj, cloud, found, true = _labels("allegro", "knife", "Use a knife by handle")
+    planner = FunctionalPlanner("allegro", PlannerSettings())
+    program, own = planner._intent_program(cloud, found.meaning, found.obj)
+    assert own == len(cloud.collision_pieces())
+    assert len(set(program._piece_index.values())) == own + 1  # one keep-out: the blade
+    blade = obj.part_names.index("blade")
+    corners = found.obj.points[found.obj.point_labels == blade]
+    hull = grown_hull(corners, 0.01)
+    truth = grown_hull(cloud.points[true == blade], 0.01)
+    handle = cloud.points[true != blade]
+    assert inside_hull(hull, cloud.points[true == blade]).mean() > 0.9
+    assert inside_hull(hull, handle).mean() < inside_hull(truth, handle).mean() + 0.15
