@@ -148,6 +148,12 @@ def print_summary(result: Any) -> None:
             f"  read {read['text']!r} as {read['understood_as']!r} (similarity "
             f"{read['similarity']:.2f}; next {read['runner_up']!r} {read['runner_up_similarity']:.2f})"
         )
+    if read is not None and read.get("model_labels"):
+        found = ", ".join(f"{part} {n}" for part, n in read["model_labels"].items())
+        print(
+            f"  parts found by the interaction model (seed points: {found}); the intent is "
+            "checked on them"
+        )
     print(f"  part touched: {s['part_touched']} (instructed: {s['part_instructed']})")
     if s["anchor_error_mm"] is not None:
         print(f"  anchor error: {s['anchor_error_mm']:.1f} mm")
@@ -162,6 +168,8 @@ def print_summary(result: Any) -> None:
         f"  candidates: {s['candidates_solved']} solved, {s['candidates_validated']} validated; "
         f"{chosen}"
     )
+    if s["intent"] is not None:
+        print(f"  intent: {'met' if s['intent_ok'] else 'NOT met'}: {s['intent']}")
     times = ", ".join(f"{k} {v:.2f} s" for k, v in s["times_s"].items())
     print(f"  time per stage: {times}")
     for note in s["notes"]:
