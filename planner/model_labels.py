@@ -74,12 +74,15 @@ def model_labels(
     seed: int = 0,
     weights: str | None = None,
     steps: int | None = None,
+    spread: str = "walk",
 ) -> ModelLabels | None:
     """The object's points labelled with the parts of the instruction's category, each part
     found by the interaction model (`anchors`: the samples already drawn for the instruction,
     which seed its own part). None where the instruction names no library category, where a
     part the definition measures (the held part, a working part, an element) got no seed
-    region, or where the part's seeds cover fewer than 8 points."""
+    region, or where the part's seeds cover fewer than 8 points. `spread`: how the seeds'
+    labels reach the other points, "walk" (`spread_labels`) or "nearest" (each point takes its
+    nearest seed's label: the baseline eval.model_labels measures beside it)."""
     if instruction.category not in CATEGORIES:
         return None
     from learned.interaction import load_model
@@ -100,7 +103,11 @@ def model_labels(
             masks[part] = mask
     if instruction.part not in masks or len(masks) < 2:
         return None
-    labels = spread_labels(points, obj.normals, {names.index(p): m for p, m in masks.items()})
+    seeds = {names.index(p): m for p, m in masks.items()}
+    if spread == "walk":
+        labels = spread_labels(points, obj.normals, seeds)
+    else:
+        labels = nearest_seed(points, seeds)
     labelled = ObjectModel(
         name=obj.name,
         cloud=points,
@@ -116,6 +123,13 @@ def model_labels(
     if not measured <= set(masks):
         return None
     return ModelLabels(labelled, meaning, {p: int(masks.get(p, np.zeros(1)).sum()) for p in names})
+
+
+def nearest_seed(points: np.ndarray, seeds: dict[int, np.ndarray]) -> np.ndarray:
+    """A label for every point: its nearest seed point's (label -> (N,) mask)."""
+    index = np.concatenate([np.flatnonzero(m) for m in seeds.values()])
+    label = np.concatenate([np.full(int(m.sum()), k) for k, m in seeds.items()])
+    return label[cKDTree(points[index]).query(points)[1]]
 
 
 def spread_labels(

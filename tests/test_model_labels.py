@@ -11,7 +11,7 @@ from models.hands import load_hand
 from models.objects import load_object, make_object, parse_instruction
 from planner.functional import FunctionalPlanner, PlannerSettings
 from planner.intent_pieces import grown_hull, inside_hull
-from planner.model_labels import model_labels, part_texts
+from planner.model_labels import model_labels, nearest_seed, part_texts, spread_labels
 from planner.settings import LearnedSettings, ScheduleSettings
 
 
@@ -103,3 +103,22 @@ def test_the_keep_out_comes_from_the_models_labels():
     handle = cloud.points[true != blade]
     assert inside_hull(hull, cloud.points[true == blade]).mean() > 0.9
     assert inside_hull(hull, handle).mean() < inside_hull(truth, handle).mean() + 0.15
+
+
+def test_the_walk_puts_the_border_in_the_crease_not_halfway_between_the_seeds():
+    """A pan seeded only at the far side of its body and along its handle (where samples'
+    fingers go): the nearest seed splits it halfway between them, well inside the body; the
+    random walk stops at the crease where the handle meets the body."""
+    pan = make_object("pan", 0)
+    points, labels = pan.points, pan.point_labels
+    body, handle = pan.part_names.index("body"), pan.part_names.index("handle")
+    x = points[:, 0]
+    span = np.ptp(x)
+    seeds = {
+        body: (labels == body) & (x < x.min() + 0.1 * span),
+        handle: (labels == handle) & (x > x.max() - 0.4 * span),
+    }
+    walked = spread_labels(points, pan.normals, seeds)
+    nearest = nearest_seed(points, seeds)
+    assert (walked == labels).mean() > 0.95
+    assert (nearest == labels).mean() < (walked == labels).mean() - 0.05
