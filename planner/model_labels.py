@@ -14,6 +14,7 @@ as on any unlabelled cloud.
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
@@ -37,6 +38,11 @@ SEED_RADIUS = 0.006  # m
 SEED_VOTES = 1
 # the random walk that spreads the seeds' labels (`spread_labels`): on this many of the points,
 # each joined to this many nearest; a convex crease costs this fraction of a concave one
+# two parts whose seeds share more than this share of the smaller one's points are not told
+# apart by the model (a screwdriver's shaft, a part word no training category has, is sought
+# on its handle: 0.49); adjacent parts it does tell apart share up to 0.25 (a bowl's body and
+# rim; one object per category of the validation split, Allegro's samples)
+MAX_SEED_OVERLAP = 0.4
 GRAPH_POINTS = 4096
 GRAPH_NEIGHBOURS = 10
 CONVEX_WEIGHT = 0.2
@@ -80,7 +86,7 @@ def model_labels(
     found by the interaction model (`anchors`: the samples already drawn for the instruction,
     which seed its own part). None where the instruction names no library category, where a
     part the definition measures (the held part, a working part, an element) got no seed
-    region, or where the part's seeds cover fewer than 8 points. `spread`: how the seeds'
+    region of 8 points, or where two parts' seeds overlap (`MAX_SEED_OVERLAP`). `spread`: how the seeds'
     labels reach the other points, "walk" (`spread_labels`) or "nearest" (each point takes its
     nearest seed's label: the baseline eval.model_labels measures beside it)."""
     if instruction.category not in CATEGORIES:
@@ -103,6 +109,9 @@ def model_labels(
             masks[part] = mask
     if instruction.part not in masks or len(masks) < 2:
         return None
+    for a, b in itertools.combinations(masks.values(), 2):
+        if (a & b).sum() > MAX_SEED_OVERLAP * min(a.sum(), b.sum()):
+            return None
     seeds = {names.index(p): m for p, m in masks.items()}
     if spread == "walk":
         labels = spread_labels(points, obj.normals, seeds)

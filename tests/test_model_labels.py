@@ -122,3 +122,12 @@ def test_the_walk_puts_the_border_in_the_crease_not_halfway_between_the_seeds():
     nearest = nearest_seed(points, seeds)
     assert (walked == labels).mean() > 0.95
     assert (nearest == labels).mean() < (walked == labels).mean() - 0.05
+
+
+@pytest.mark.parametrize("hand_name", ["allegro", "leap", "shadow"])
+def test_no_labels_where_the_model_does_not_tell_two_parts_apart(hand_name):
+    """A screwdriver's shaft is a part word no training category has: asked for it, the model
+    points at the handle, the two seeds overlap, and no labels are made (a keep-out around a
+    "shaft" on the handle would leave nothing to hold)."""
+    *_, found, _ = _labels(hand_name, "screwdriver", "Use a screwdriver by handle")
+    assert found is None
