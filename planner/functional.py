@@ -188,7 +188,7 @@ class FunctionalPlanner:
                 obj,
                 instruction,
                 self.hand,
-                drawn.anchors,
+                drawn.anchors if understood.parsed else None,
                 s.learned.seed,
                 s.learned.interaction_weights,
                 s.learned.sample_steps,

@@ -76,15 +76,17 @@ def model_labels(
     obj: ObjectModel,
     instruction: Instruction,
     hand: HandModel,
-    anchors: np.ndarray,
+    anchors: np.ndarray | None,
     seed: int = 0,
     weights: str | None = None,
     steps: int | None = None,
     spread: str = "walk",
 ) -> ModelLabels | None:
     """The object's points labelled with the parts of the instruction's category, each part
-    found by the interaction model (`anchors`: the samples already drawn for the instruction,
-    which seed its own part). None where the instruction names no library category, where a
+    found by the interaction model, asked in the table's words (`anchors`: samples already
+    drawn for the instruction in those words, which seed its own part; None: drawn here, as
+    for a free sentence, whose samples follow its own wording: "hand me the knife handle
+    first", read as Handover by the blade, draws them on the handle). None where the instruction names no library category, where a
     part the definition measures (the held part, a working part, an element) got no seed
     region of 8 points, or where two parts' seeds overlap (`MAX_SEED_OVERLAP`). `spread`: how the seeds'
     labels reach the other points, "walk" (`spread_labels`) or "nearest" (each point takes its
@@ -98,7 +100,7 @@ def model_labels(
     names = CATEGORIES[instruction.category].parts
     masks: dict[str, np.ndarray] = {}
     for part, text in part_texts(instruction).items():
-        if part == instruction.part:
+        if part == instruction.part and anchors is not None:
             drawn = anchors
         elif text is None:
             continue
