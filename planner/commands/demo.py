@@ -102,9 +102,10 @@ def run(args: argparse.Namespace) -> int:
 
 def _learned(hands: list[str], out) -> list[tuple]:
     """Free-form sentences on unlabelled clouds, planned on the learned stages' proposals:
-    rows of (hand, sentence, read as, holds, intent met, time s, page). The intent is checked
-    where it can be without labels (Liftup; Hold on the region the samples point at), else
-    "-"."""
+    rows of (hand, sentence, read as, holds, intent met, time s, page). On the clouds the
+    intent is checked without labels (Liftup), on the region the samples point at (Hold) or on
+    the parts the interaction model finds (Use, Handover: planner.model_labels); "-" where it
+    could not be."""
     from models.hands import load_hand
     from models.objects import load_object, make_object
     from planner.functional import FunctionalPlanner, PlannerSettings
