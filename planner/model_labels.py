@@ -72,7 +72,7 @@ def part_texts(instruction: Instruction) -> dict[str, str | None]:
     return texts
 
 
-def model_labels(
+def part_seeds(
     obj: ObjectModel,
     instruction: Instruction,
     hand: HandModel,
@@ -80,24 +80,17 @@ def model_labels(
     seed: int = 0,
     weights: str | None = None,
     steps: int | None = None,
-    spread: str = "walk",
-) -> ModelLabels | None:
-    """The object's points labelled with the parts of the instruction's category, each part
-    found by the interaction model, asked in the table's words (`anchors`: samples already
+) -> dict[str, np.ndarray]:
+    """Each sought part's seed: a mask of the object's points its samples point at, asked in
+    the table's words (`part_texts`; parts of 8 points or more). `anchors`: samples already
     drawn for the instruction in those words, which seed its own part; None: drawn here, as
-    for a free sentence, whose samples follow its own wording: "hand me the knife handle
-    first", read as Handover by the blade, draws them on the handle). None where the instruction names no library category, where a
-    part the definition measures (the held part, a working part, an element) got no seed
-    region of 8 points, or where two parts' seeds overlap (`MAX_SEED_OVERLAP`). `spread`: how the seeds'
-    labels reach the other points, "walk" (`spread_labels`) or "nearest" (each point takes its
-    nearest seed's label: the baseline eval.model_labels measures beside it)."""
+    for a free sentence, whose samples follow its own wording ("hand me the knife handle
+    first", read as Handover by the blade, draws them on the handle). {} outside the library."""
     if instruction.category not in CATEGORIES:
-        return None
+        return {}
     from learned.interaction import load_model
 
-    points = obj.points
     model = load_model(weights)
-    names = CATEGORIES[instruction.category].parts
     masks: dict[str, np.ndarray] = {}
     for part, text in part_texts(instruction).items():
         if part == instruction.part and anchors is not None:
@@ -105,23 +98,36 @@ def model_labels(
         elif text is None:
             continue
         else:
-            _, drawn = model.sample(points, text, hand, PART_SAMPLES, None, steps, seed=seed)
-        mask = pointed_region(points, drawn, SEED_RADIUS, SEED_VOTES)
+            _, drawn = model.sample(obj.points, text, hand, PART_SAMPLES, None, steps, seed=seed)
+        mask = pointed_region(obj.points, drawn, SEED_RADIUS, SEED_VOTES)
         if mask.sum() >= 8:
             masks[part] = mask
+    return masks
+
+
+def labels_from_seeds(
+    obj: ObjectModel, instruction: Instruction, masks: dict[str, np.ndarray], spread: str = "walk"
+) -> ModelLabels | None:
+    """The object's points labelled with the parts of the instruction's category from their
+    seeds (`part_seeds`). None where the instructed part or every other part has no seed, where
+    a part the definition measures (the held part, a working part, an element) has none, or
+    where two parts' seeds overlap (`MAX_SEED_OVERLAP`). `spread`: how the seeds' labels reach
+    the other points, "walk" (`spread_labels`) or "nearest" (each point takes its nearest
+    seed's label: the baseline eval.model_labels measures beside it)."""
     if instruction.part not in masks or len(masks) < 2:
         return None
     for a, b in itertools.combinations(masks.values(), 2):
         if (a & b).sum() > MAX_SEED_OVERLAP * min(a.sum(), b.sum()):
             return None
+    names = CATEGORIES[instruction.category].parts
     seeds = {names.index(p): m for p, m in masks.items()}
     if spread == "walk":
-        labels = spread_labels(points, obj.normals, seeds)
+        labels = spread_labels(obj.points, obj.normals, seeds)
     else:
-        labels = nearest_seed(points, seeds)
+        labels = nearest_seed(obj.points, seeds)
     labelled = ObjectModel(
         name=obj.name,
-        cloud=points,
+        cloud=obj.points,
         cloud_normals=obj.normals,
         cloud_labels=labels,
         part_names=names,
@@ -133,7 +139,23 @@ def model_labels(
     measured |= {e.part for e in meaning.elements}
     if not measured <= set(masks):
         return None
-    return ModelLabels(labelled, meaning, {p: int(masks.get(p, np.zeros(1)).sum()) for p in names})
+    counts = {p: int(masks[p].sum()) if p in masks else 0 for p in names}
+    return ModelLabels(labelled, meaning, counts)
+
+
+def model_labels(
+    obj: ObjectModel,
+    instruction: Instruction,
+    hand: HandModel,
+    anchors: np.ndarray | None,
+    seed: int = 0,
+    weights: str | None = None,
+    steps: int | None = None,
+) -> ModelLabels | None:
+    """The object's parts found by the interaction model (`part_seeds`) and spread over its
+    points by the random walk (`labels_from_seeds`); None where they cannot be trusted."""
+    masks = part_seeds(obj, instruction, hand, anchors, seed, weights, steps)
+    return labels_from_seeds(obj, instruction, masks)
 
 
 def nearest_seed(points: np.ndarray, seeds: dict[int, np.ndarray]) -> np.ndarray:
