@@ -59,6 +59,7 @@ from tqdm import tqdm
 from models.errors import DrograspError
 from models.hands import available_hands, load_hand
 from models.objects import ObjectModel, make_object
+from models.objects.names import INTENTS
 from models.objects.views import random_turn, sampled_cloud_object, single_view_object, turned
 from planner.batch.executors import one_thread
 from planner.commands.validate import parse_overrides
@@ -275,10 +276,12 @@ def tasks(
     turn: bool = False,
     overrides: dict[str, Any] | None = None,
     seeds: tuple[int, ...] = (0,),
+    intents: list[str] | None = None,
 ) -> list[Task]:
     """One task per (pair, method, sample seed); `overrides`: planner settings (dotted keys)
     for every method, over each method's own; `seeds`: the learned methods' sample seeds
-    (learned.seed; the model-based planner draws nothing, so it runs once)."""
+    (learned.seed; the model-based planner draws nothing, so it runs once); `intents`: only
+    the instructions of these (a pair keeps the rewording it has in the whole run)."""
     from eval.planner_benchmark import pairs
     from learned.paraphrase import eval_paraphrases, request_of
 
@@ -288,6 +291,8 @@ def tasks(
         chosen = [c for c in chosen if c[1] in category_names]
     over = tuple((overrides or {}).items())
     for i, (hand, cat, seed, instruction) in enumerate(chosen):
+        if intents and instruction.split()[0] not in intents:
+            continue
         reworded = eval_paraphrases(request_of(instruction))
         for method in methods:
             learned = METHODS[method]["proposer"] != "model"
@@ -434,6 +439,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--hands", nargs="+", default=None, help="default: every built-in hand")
     p.add_argument("--methods", nargs="+", default=list(METHODS), choices=list(METHODS))
     p.add_argument("--categories", nargs="+", default=None, help="default: every category")
+    p.add_argument(
+        "--intents", nargs="+", default=None, choices=INTENTS, help="default: every intent"
+    )
     p.add_argument("--paraphrase", action="store_true", help="evaluation-only rewordings")
     p.add_argument("--view", default="full", choices=VIEWS, help="what the methods are given")
     p.add_argument("--turn", action="store_true", help="turn every object (yaw, tilt <= 30 deg)")
@@ -491,6 +499,7 @@ def main(argv: list[str] | None = None) -> int:
         args.turn,
         overrides,
         tuple(args.seeds),
+        args.intents,
     )
     todo = [t for t in todo_all if t.key not in done]
     print(f"{len(todo_all)} tasks, {len(todo_all) - len(todo)} done before", flush=True)
@@ -519,12 +528,14 @@ def main(argv: list[str] | None = None) -> int:
     title = (
         f"{args.split} split, {args.objects_per_category} object(s) per category, {words}, "
         f"{seen}{', turned' if args.turn else ''}"
+        + (f", {' and '.join(args.intents)} only" if args.intents else "")
         + (f", sample seeds {', '.join(map(str, args.seeds))}" if len(args.seeds) > 1 else "")
     )
     summary = {
         "split": args.split,
         "objects_per_category": args.objects_per_category,
         "paraphrase": args.paraphrase,
+        "intents": args.intents,
         "view": args.view,
         "turn": args.turn,
         "candidates": args.candidates,

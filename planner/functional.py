@@ -172,17 +172,14 @@ class FunctionalPlanner:
                 *drawing, weights=s.learned.interaction_weights, steps=s.learned.sample_steps
             )
         drawn_time = time.perf_counter() - t0
-        # on a cloud without labels, Hold is measured with the region the samples point at as
-        # its part (models.objects.intents.region_checked)
-        region = None
-        if s.intent.aware and not known and region_checked(instruction.intent):
-            region = region_object(obj, drawn.anchors)
-            if region is not None:
-                checked, meaning = True, region_definition(region, instruction)
-        # Use and Handover need the other parts: the interaction model's labels stand in
+        # Use and Handover need the other parts, and Hold (learned.labels_over_region) is
+        # measured better on its whole part than on a patch of it: the interaction model's
+        # labels stand in (planner.model_labels)
         labels = None
-        needs_parts = not (label_free(instruction.intent) or region_checked(instruction.intent))
-        if s.intent.aware and not known and needs_parts and not direct and s.learned.model_labels:
+        wants_labels = not label_free(instruction.intent) and (
+            s.learned.labels_over_region or not region_checked(instruction.intent)
+        )
+        if s.intent.aware and not known and wants_labels and not direct and s.learned.model_labels:
             t0 = time.perf_counter()
             labels = model_labels(
                 obj,
@@ -196,6 +193,13 @@ class FunctionalPlanner:
             drawn.times["labels"] = time.perf_counter() - t0
             if labels is not None:
                 checked, meaning = True, labels.meaning
+        # else Hold is measured with the region the samples point at as its part
+        # (models.objects.intents.region_checked)
+        region = None
+        if labels is None and s.intent.aware and not known and region_checked(instruction.intent):
+            region = region_object(obj, drawn.anchors)
+            if region is not None:
+                checked, meaning = True, region_definition(region, instruction)
         kept_out = labels is not None and s.learned.sample_keep_outs
         proposals = []
         for i in range(len(drawn.wrists)):

@@ -246,6 +246,10 @@ class LearnedSettings:
     # the part, Handover 34/29/23% -> 57/46/53%, first samples the same, within 8 -3/0/-1
     # points, a Use or Handover plan 1-4 s longer (docs/learned_log.md)
     model_labels: bool = True
+    # with model_labels: Hold (an intent measured on its part's own points) on the labelled
+    # part too, in place of the region the samples point at, and its later proposals the
+    # model-based proposer's on that part
+    labels_over_region: bool = False
     # with model_labels: the samples too are solved with the intent's keep-outs. Off: on the
     # validation pairs it moved first samples by -23 to +16 points per hand and intent for no
     # clear intent gain (docs/learned_log.md)
