@@ -227,16 +227,18 @@ def test_liftup_is_checked_on_a_bare_cloud_and_samples_facing_down_go_first(hand
 
 
 @pytest.mark.slow
-def test_hold_is_checked_on_a_bare_cloud_with_the_pointed_region_as_its_part():
-    """Hold's palm contact needs a part: on a bare cloud the region the samples point at is
-    that part, so every solved candidate is checked (and the held ones meeting it preferred);
-    with intent awareness off nothing is checked."""
+@pytest.mark.parametrize("over_region", [True, False])
+def test_hold_is_checked_on_a_bare_cloud_on_the_model_labels_or_the_pointed_region(over_region):
+    """Hold's palm contact needs a part: on a bare cloud the part as the interaction model
+    labels it (learned.labels_over_region), or else the region the samples point at, is that
+    part, so every solved candidate is checked (and the held ones meeting it preferred); with
+    intent awareness off nothing is checked."""
     cloud = load_object(make_object("mug", 3).sample_cloud(4096).points)
 
     def planned(aware: bool):
         settings = PlannerSettings(
             schedule=ScheduleSettings(max_candidates=1),
-            learned=LearnedSettings(samples=8),
+            learned=LearnedSettings(samples=8, labels_over_region=over_region),
             intent=IntentSettings(aware=aware),
         )
         planner = FunctionalPlanner("allegro", settings)
@@ -245,6 +247,9 @@ def test_hold_is_checked_on_a_bare_cloud_with_the_pointed_region_as_its_part():
 
     result = planned(True)
     assert result.instruction.intent == "Hold"
+    assert ("model_labels" in result.understood) == over_region
+    if over_region:
+        assert result.understood["model_labels"]["body"] > 0
     solved = [c for c in result.candidates if c.solve.ok]
     assert solved
     for c in solved:

@@ -297,7 +297,7 @@ def test_demo_lists_every_hand(tmp_path):
     learned = run.stdout.split("learned stages")[1]
     assert "Hold a bottle by body" in learned and "intent met" in learned
     rows = {line.split()[1]: line.split() for line in learned.splitlines()[3:] if line.strip()}
-    assert rows["hold"][-2] in ("yes", "no")  # Hold: checked on the samples' region
+    assert rows["hold"][-2] in ("yes", "no")  # Hold: checked on the model's part labels
     assert rows["hand"][-2] in ("yes", "no")  # Handover: checked on the model's part labels
     assert "Learned stages: unlabelled clouds" in index and "meets its intent" in index
 
