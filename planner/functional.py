@@ -189,6 +189,7 @@ class FunctionalPlanner:
                 s.learned.seed,
                 s.learned.interaction_weights,
                 s.learned.sample_steps,
+                s.learned.label_samples,
             )
             drawn.times["labels"] = time.perf_counter() - t0
             if labels is not None:

@@ -30,7 +30,8 @@ from models.objects.library import CATEGORIES
 from planner.intent import intent_definition
 from planner.learned_proposer import pointed_region
 
-# samples drawn for each part other than the instructed one (whose own samples are reused)
+# samples drawn for each part other than the instructed one (whose own samples are reused);
+# planning takes LearnedSettings.label_samples
 PART_SAMPLES = 8
 # a part's seed: the points within SEED_RADIUS of the anchors of SEED_VOTES of the samples
 # that point at the same region as most do (pointed_region)
@@ -80,9 +81,10 @@ def part_seeds(
     seed: int = 0,
     weights: str | None = None,
     steps: int | None = None,
+    samples: int = PART_SAMPLES,
 ) -> dict[str, np.ndarray]:
     """Each sought part's seed: a mask of the object's points its samples point at, asked in
-    the table's words (`part_texts`; parts of 8 points or more). `anchors`: samples already
+    the table's words (`part_texts`; parts of 8 points or more), `samples` drawn per part. `anchors`: samples already
     drawn for the instruction in those words, which seed its own part; None: drawn here, as
     for a free sentence, whose samples follow its own wording ("hand me the knife handle
     first", read as Handover by the blade, draws them on the handle). {} outside the library."""
@@ -98,7 +100,7 @@ def part_seeds(
         elif text is None:
             continue
         else:
-            _, drawn = model.sample(obj.points, text, hand, PART_SAMPLES, None, steps, seed=seed)
+            _, drawn = model.sample(obj.points, text, hand, samples, None, steps, seed=seed)
         mask = pointed_region(obj.points, drawn, SEED_RADIUS, SEED_VOTES)
         if mask.sum() >= 8:
             masks[part] = mask
@@ -151,10 +153,11 @@ def model_labels(
     seed: int = 0,
     weights: str | None = None,
     steps: int | None = None,
+    samples: int = PART_SAMPLES,
 ) -> ModelLabels | None:
     """The object's parts found by the interaction model (`part_seeds`) and spread over its
     points by the random walk (`labels_from_seeds`); None where they cannot be trusted."""
-    masks = part_seeds(obj, instruction, hand, anchors, seed, weights, steps)
+    masks = part_seeds(obj, instruction, hand, anchors, seed, weights, steps, samples)
     return labels_from_seeds(obj, instruction, masks)
 
 

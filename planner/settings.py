@@ -252,6 +252,8 @@ class LearnedSettings:
     # split's Hold pairs (three seeds): meets Hold 70/65/68% -> 79/80/66% of the grasps held,
     # within 8 92/94/94% -> 92/97/97%, 2.7/3.3/4.4 s a pair against 3.4/4.1/4.8 s
     labels_over_region: bool = True
+    # with model_labels: samples drawn to seed each part other than the instructed one
+    label_samples: int = 8
     # with model_labels: the samples too are solved with the intent's keep-outs. Off: on the
     # validation pairs it moved first samples by -23 to +16 points per hand and intent for no
     # clear intent gain (docs/learned_log.md)
@@ -266,6 +268,10 @@ class LearnedSettings:
             raise PlanningError(
                 'learned.solver="fit" fits the joints to D(R,O)\'s point targets; it needs '
                 "learned.dro=True"
+            )
+        if self.label_samples < 1:
+            raise PlanningError(
+                f"learned.label_samples must be at least 1, got {self.label_samples}"
             )
 
 

@@ -39,6 +39,15 @@ def test_sample_seeds_repeat_the_learned_methods_only_and_are_told_apart():
     assert len({t.key for t in tasks}) == len(tasks)  # resumable: every task its own record
 
 
+def test_intents_keep_their_instructions_and_each_pair_its_rewording():
+    every = benchmark.tasks("test", 1, ["allegro"], ["learned"], True, 8, 8, ["mug", "knife"])
+    hold = benchmark.tasks(
+        "test", 1, ["allegro"], ["learned"], True, 8, 8, ["mug", "knife"], intents=["Hold"]
+    )
+    assert hold and all(t.instruction.startswith("Hold ") for t in hold)
+    assert hold == [t for t in every if t.instruction.startswith("Hold ")]
+
+
 def test_the_table_gives_first_and_within_per_seed():
     def rec(seed, first, within):
         r = benchmark.Record("learned", "allegro", "mug", 0, "Use a mug by handle", "t", "handle")

@@ -6,12 +6,14 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
+from eval.model_labels import covered
 from learned.interaction import load_model
+from models.errors import PlanningError
 from models.hands import load_hand
 from models.objects import load_object, make_object, parse_instruction
 from planner.functional import FunctionalPlanner, PlannerSettings
 from planner.intent_pieces import grown_hull, inside_hull
-from planner.model_labels import model_labels, nearest_seed, part_texts, spread_labels
+from planner.model_labels import model_labels, nearest_seed, part_seeds, part_texts, spread_labels
 from planner.settings import LearnedSettings, ScheduleSettings
 
 
@@ -49,6 +51,31 @@ def test_no_labels_where_a_measured_part_is_named_by_no_instruction():
     plan goes on without the Use check) rather than a definition on a part never found."""
     *_, found, _ = _labels("allegro", "pen", "Use a pen by barrel")
     assert found is None
+
+
+def test_more_samples_per_part_seed_more_of_it():
+    obj = make_object("bowl", 3)
+    cloud = load_object(obj.sample_cloud(4096, seed=1).points)
+    hand, instruction = load_hand("allegro"), parse_instruction("Use a bowl by body")
+    few = part_seeds(cloud, instruction, hand, None, samples=2)
+    many = part_seeds(cloud, instruction, hand, None, samples=16)
+    assert set(many) == {"body", "rim"}
+    assert all(many[p].sum() > few.get(p, np.zeros(1)).sum() for p in many)
+
+
+def test_label_samples_must_be_positive():
+    with pytest.raises(PlanningError, match="label_samples"):
+        LearnedSettings(label_samples=0)
+
+
+def test_other_parts_covered_counts_their_points_near_their_label():
+    points = np.c_[np.linspace(0.0, 0.1, 11), np.zeros(11), np.zeros(11)]
+    true = np.array([0] * 5 + [1] * 6)
+    assert covered(points, true, true, held=0) == 1.0
+    found = true.copy()
+    found[5:8] = 0  # 3 of the other part's points labelled held; the nearest 1 is 1 cm off
+    assert covered(points, found, true, held=0) == pytest.approx(3 / 6)
+    assert covered(points, found, np.zeros(11, int), held=0) is None
 
 
 def test_no_labels_outside_the_library():
