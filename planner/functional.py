@@ -190,6 +190,7 @@ class FunctionalPlanner:
                 s.learned.interaction_weights,
                 s.learned.sample_steps,
                 s.learned.label_samples,
+                s.learned.held_reach,
             )
             drawn.times["labels"] = time.perf_counter() - t0
             if labels is not None:

@@ -108,14 +108,19 @@ def part_seeds(
 
 
 def labels_from_seeds(
-    obj: ObjectModel, instruction: Instruction, masks: dict[str, np.ndarray], spread: str = "walk"
+    obj: ObjectModel,
+    instruction: Instruction,
+    masks: dict[str, np.ndarray],
+    spread: str = "walk",
+    held_reach: float = 0.0,
 ) -> ModelLabels | None:
     """The object's points labelled with the parts of the instruction's category from their
     seeds (`part_seeds`). None where the instructed part or every other part has no seed, where
     a part the definition measures (the held part, a working part, an element) has none, or
     where two parts' seeds overlap (`MAX_SEED_OVERLAP`). `spread`: how the seeds' labels reach
     the other points, "walk" (`spread_labels`) or "nearest" (each point takes its nearest
-    seed's label: the baseline eval.model_labels measures beside it)."""
+    seed's label: the baseline eval.model_labels measures beside it). `held_reach` (m, 0:
+    off): the instructed part only within this of its seed (`trim_held`)."""
     if instruction.part not in masks or len(masks) < 2:
         return None
     for a, b in itertools.combinations(masks.values(), 2):
@@ -127,6 +132,9 @@ def labels_from_seeds(
         labels = spread_labels(obj.points, obj.normals, seeds)
     else:
         labels = nearest_seed(obj.points, seeds)
+    if held_reach > 0:
+        held = names.index(instruction.part)
+        labels = trim_held(obj.points, labels, masks[instruction.part], held, held_reach)
     labelled = ObjectModel(
         name=obj.name,
         cloud=obj.points,
@@ -154,11 +162,28 @@ def model_labels(
     weights: str | None = None,
     steps: int | None = None,
     samples: int = PART_SAMPLES,
+    held_reach: float = 0.0,
 ) -> ModelLabels | None:
     """The object's parts found by the interaction model (`part_seeds`) and spread over its
     points by the random walk (`labels_from_seeds`); None where they cannot be trusted."""
     masks = part_seeds(obj, instruction, hand, anchors, seed, weights, steps, samples)
-    return labels_from_seeds(obj, instruction, masks)
+    return labels_from_seeds(obj, instruction, masks, held_reach=held_reach)
+
+
+def trim_held(
+    points: np.ndarray, labels: np.ndarray, seed: np.ndarray, held: int, reach: float
+) -> np.ndarray:
+    """The labels with the held part kept only within `reach` of its seed (mask): its points
+    beyond take the label of their nearest point of another part. Where a part's seeds are
+    sparse the walk can carry the held label far over it (a pan's handle over half its body);
+    the held part is where the grasp goes and the others what it keeps clear of, so a point
+    the model did not point at counts as another part's."""
+    out = labels.copy()
+    far = (labels == held) & (cKDTree(points[seed]).query(points)[0] > reach)
+    others = np.flatnonzero(labels != held)
+    if far.any() and len(others):
+        out[far] = labels[others[cKDTree(points[others]).query(points[far])[1]]]
+    return out
 
 
 def nearest_seed(points: np.ndarray, seeds: dict[int, np.ndarray]) -> np.ndarray:

@@ -254,6 +254,10 @@ class LearnedSettings:
     labels_over_region: bool = True
     # with model_labels: samples drawn to seed each part other than the instructed one
     label_samples: int = 8
+    # m; with model_labels: the instructed part only within this of the points its samples
+    # point at, the rest of its label given to the nearest other part (planner.model_labels
+    # trim_held); 0: as the walk spreads it
+    held_reach: float = 0.0
     # with model_labels: the samples too are solved with the intent's keep-outs. Off: on the
     # validation pairs it moved first samples by -23 to +16 points per hand and intent for no
     # clear intent gain (docs/learned_log.md)
@@ -269,6 +273,8 @@ class LearnedSettings:
                 'learned.solver="fit" fits the joints to D(R,O)\'s point targets; it needs '
                 "learned.dro=True"
             )
+        if not self.held_reach >= 0:
+            raise PlanningError(f"learned.held_reach must be >= 0 m, got {self.held_reach}")
         if self.label_samples < 1:
             raise PlanningError(
                 f"learned.label_samples must be at least 1, got {self.label_samples}"

@@ -13,7 +13,14 @@ from models.hands import load_hand
 from models.objects import load_object, make_object, parse_instruction
 from planner.functional import FunctionalPlanner, PlannerSettings
 from planner.intent_pieces import grown_hull, inside_hull
-from planner.model_labels import model_labels, nearest_seed, part_seeds, part_texts, spread_labels
+from planner.model_labels import (
+    model_labels,
+    nearest_seed,
+    part_seeds,
+    part_texts,
+    spread_labels,
+    trim_held,
+)
 from planner.settings import LearnedSettings, ScheduleSettings
 
 
@@ -63,9 +70,21 @@ def test_more_samples_per_part_seed_more_of_it():
     assert all(many[p].sum() > few.get(p, np.zeros(1)).sum() for p in many)
 
 
+def test_the_held_part_is_kept_near_its_seed_and_the_rest_goes_to_its_neighbours():
+    points = np.c_[np.linspace(0.0, 0.1, 11), np.zeros(11), np.zeros(11)]
+    labels = np.array([1] * 2 + [0] * 9)  # the walk carried held (0) over most of the line
+    seed = np.zeros(11, bool)
+    seed[[9, 10]] = True  # the model pointed at the far end only
+    trimmed = trim_held(points, labels, seed, held=0, reach=0.025)
+    assert trimmed.tolist() == [1] * 7 + [0] * 4  # 7 cm and on: within 2.5 cm of 9 cm
+    assert trim_held(points, np.zeros(11, int), seed, 0, 0.025).tolist() == [0] * 11
+
+
 def test_label_samples_must_be_positive():
     with pytest.raises(PlanningError, match="label_samples"):
         LearnedSettings(label_samples=0)
+    with pytest.raises(PlanningError, match="held_reach"):
+        LearnedSettings(held_reach=float("nan"))
 
 
 def test_other_parts_covered_counts_their_points_near_their_label():
