@@ -30,9 +30,11 @@ from models.objects.library import CATEGORIES
 from planner.intent import intent_definition
 from planner.learned_proposer import pointed_region
 
-# samples drawn for each part other than the instructed one (whose own samples are reused);
-# planning takes LearnedSettings.label_samples
-PART_SAMPLES = 8
+# samples drawn for each part other than the instructed one (whose own samples are reused),
+# and how far from its seed the instructed part's label reaches (`trim_held`); planning takes
+# LearnedSettings.label_samples and .held_reach
+PART_SAMPLES = 16
+HELD_REACH = 0.03  # m
 # a part's seed: the points within SEED_RADIUS of the anchors of SEED_VOTES of the samples
 # that point at the same region as most do (pointed_region)
 SEED_RADIUS = 0.006  # m
@@ -112,7 +114,7 @@ def labels_from_seeds(
     instruction: Instruction,
     masks: dict[str, np.ndarray],
     spread: str = "walk",
-    held_reach: float = 0.0,
+    held_reach: float = HELD_REACH,
 ) -> ModelLabels | None:
     """The object's points labelled with the parts of the instruction's category from their
     seeds (`part_seeds`). None where the instructed part or every other part has no seed, where
@@ -162,7 +164,7 @@ def model_labels(
     weights: str | None = None,
     steps: int | None = None,
     samples: int = PART_SAMPLES,
-    held_reach: float = 0.0,
+    held_reach: float = HELD_REACH,
 ) -> ModelLabels | None:
     """The object's parts found by the interaction model (`part_seeds`) and spread over its
     points by the random walk (`labels_from_seeds`); None where they cannot be trusted."""
