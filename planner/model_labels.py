@@ -85,11 +85,12 @@ def part_seeds(
     steps: int | None = None,
     samples: int = PART_SAMPLES,
 ) -> dict[str, np.ndarray]:
-    """Each sought part's seed: a mask of the object's points its samples point at, asked in
-    the table's words (`part_texts`; parts of 8 points or more), `samples` drawn per part. `anchors`: samples already
-    drawn for the instruction in those words, which seed its own part; None: drawn here, as
-    for a free sentence, whose samples follow its own wording ("hand me the knife handle
-    first", read as Handover by the blade, draws them on the handle). {} outside the library."""
+    """Each sought part's seed: a mask of the object's points its `samples` point at, asked
+    in the table's words (`part_texts`; parts of 8 points or more). `anchors`: samples
+    already drawn for the instruction in those words, which seed its own part; None: drawn
+    here, as for a free sentence, whose samples follow its own wording ("hand me the knife
+    handle first", read as Handover by the blade, draws them on the handle). {} outside the
+    library."""
     if instruction.category not in CATEGORIES:
         return {}
     from learned.interaction import load_model
