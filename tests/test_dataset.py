@@ -117,6 +117,7 @@ def test_dataset_info_command(tiny, capsys):
     assert dataset_info(root / "data") == printed
 
 
+@pytest.mark.slow  # real plans for two hands: 20 s, which the default run's 5 minutes lack
 def test_generate_a_tiny_real_dataset(tmp_path):
     from planner.batch.generate import GenerateSettings, generate_dataset
 
