@@ -58,7 +58,7 @@ from tqdm import tqdm
 
 from models.errors import DrograspError
 from models.hands import available_hands, load_hand
-from models.objects import ObjectModel, make_object
+from models.objects import ObjectModel, make_object, parse_instruction
 from models.objects.names import INTENTS
 from models.objects.views import random_turn, sampled_cloud_object, single_view_object, turned
 from planner.batch.executors import one_thread
@@ -291,7 +291,7 @@ def tasks(
         chosen = [c for c in chosen if c[1] in category_names]
     over = tuple((overrides or {}).items())
     for i, (hand, cat, seed, instruction) in enumerate(chosen):
-        if intents and instruction.split()[0] not in intents:
+        if intents and parse_instruction(instruction).intent not in intents:
             continue
         reworded = eval_paraphrases(request_of(instruction))
         for method in methods:

@@ -1,16 +1,17 @@
 """How well the interaction model's part labels (planner.model_labels) match the true ones.
 
-For every Use, Handover and Hold instruction of the split's objects (the intents checked on
-them), each hand's samples seed the parts and the labels are spread over a bare cloud of the
-object; scored against the procedural object's own labels (never an input): the share of points
-given their true part, the share of the other parts' points (those Use and Handover keep the
-hand clear of) within COVER_DISTANCE of points labelled with their part (a hand near an
-uncovered point is near that part unseen), by the random walk and, in the same run, by the
-nearest seed (the baseline), and how often no labels were made (a part the definition measures
-was not found).
+For every instruction of the split's objects whose intent planning checks on the labels (every
+intent not measured without parts: Use, Handover, Hold), each hand's samples seed the parts and
+the labels are spread over a bare cloud of the object; scored against the procedural object's
+own labels (never an input): the share of points given their true part, the share of the other
+parts' points (those Use and Handover keep the hand clear of) within COVER_DISTANCE of points
+labelled with their part (a hand near an uncovered point is near that part unseen), the share of
+the points labelled as the instructed part that truly are, by the random walk and, in the same
+run, by the nearest seed (the baseline), and how often no labels were made (a part the
+definition measures was not found).
 
     python -m eval.model_labels --split val [--hands allegro] [--objects-per-category 1]
-        [--label-samples 8]
+        [--label-samples 16] [--held-reach 0.03]
 """
 
 from __future__ import annotations
@@ -28,14 +29,17 @@ from tqdm import tqdm
 from learned.interaction import load_model
 from models.hands import available_hands, load_hand
 from models.objects import instructions, load_object, make_object
+from models.objects.intents import label_free
 from models.objects.library import CATEGORIES
+from models.objects.names import INTENTS as ALL_INTENTS
 from models.objects.splits import seeds as split_seeds
 from planner.model_labels import labels_from_seeds, part_seeds
 from planner.settings import LearnedSettings
 
 CLOUD_POINTS = 4096  # as eval.benchmark's and drograsp demo's clouds
 COVER_DISTANCE = 0.005  # m
-INTENTS = ("Use", "Handover", "Hold")  # the intents planned on the model's labels
+# the intents planned on the model's labels (planner.functional, learned.labels_over_region)
+INTENTS = tuple(i for i in ALL_INTENTS if not label_free(i))
 SPREADS = ("walk", "nearest")
 
 
@@ -60,7 +64,7 @@ def run(
     per_category: int,
     samples: int,
     label_samples: int,
-    held_reach: float = 0.0,
+    held_reach: float,
 ) -> list[dict]:
     """One row per (hand, object, instruction, spread)."""
     model = load_model(None)
@@ -112,7 +116,8 @@ def run(
 
 def table(rows: list[dict], hands: list[str]) -> str:
     """Per hand and spread: mean agreement where labels were made, the worst category, the
-    other parts covered, how many instructions got none, median seconds."""
+    other parts covered, the instructed part's precision, how many instructions got none,
+    median seconds."""
     groups = defaultdict(list)
     for r in rows:
         groups[(r["hand"], r["spread"])].append(r)
