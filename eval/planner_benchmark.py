@@ -53,6 +53,8 @@ class PairRecord:
     # checked) and its wrist [x, y, z, qw, qx, qy, qz], for distinct grasps across intents
     intent_ok: bool | None = None
     wrist: list[float] | None = None
+    # why the intent cannot be met on the part (PlanResult.unmeetable); None: it can
+    unmeetable: str | None = None
 
 
 def write_records(records: Sequence[PairRecord], path: Path) -> None:
@@ -128,6 +130,7 @@ def run_pair(args: tuple[str, str, int, str, int, tuple[str, ...]]) -> PairRecor
         plan_time=elapsed,
         candidate_summaries=[c.summary() for c in result.candidates],
         intent_ok=result.intent_ok,
+        unmeetable=result.unmeetable,
         wrist=(
             None
             if result.grasp is None
@@ -161,8 +164,13 @@ def summarize(records: list[PairRecord]) -> list[dict]:
                     statistics.mean(r.candidates for r in held) if held else float("nan")
                 ),
                 "errors": sum(bool(r.error) for r in rs),
-                # of the returned grasps held on the instructed part: meeting their intent
+                # of the returned grasps held on the instructed part: meeting their intent,
+                # and the same where the definition can be met on the part
                 "intent_ok": _share([r.intent_ok for r in rs if r.part_ok]),
+                "intent_ok_meetable": _share(
+                    [r.intent_ok for r in rs if r.part_ok and r.unmeetable is None]
+                ),
+                "unmeetable_pairs": sum(r.unmeetable is not None for r in rs),
             }
         )
     return rows
@@ -298,12 +306,22 @@ def main() -> None:
         + (f", intents {' '.join(args.intents)}" if args.intents else "")
         + (f", settings {' '.join(args.set)}" if args.set else "")
     )
-    print_table(summarize(records))
+    rows = summarize(records)
+    print_table(rows)
     print("\nper intent: held on the part, and of those meeting the intent's definition")
     for r in intent_rows(records):
         print(
             f"{r['hand']:<8} {r['intent']:<9} {r['pairs']:>5} {r['on_part']:>8.1%} "
             f"{r['intent_ok']:>9.1%}"
+        )
+    if any(r["unmeetable_pairs"] for r in rows):
+        print(
+            "meeting the intent where its definition can be met on the part "
+            "(planner.intent.unmeetable): "
+            + ", ".join(
+                f"{r['hand']} {r['intent_ok_meetable']:.1%} ({r['unmeetable_pairs']} pairs left out)"
+                for r in rows
+            )
         )
     d = distinct_grasps(records)
     if d["pairs"]:  # none where one intent was planned (--intents)

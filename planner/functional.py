@@ -32,6 +32,7 @@ from planner.intent import (
     faces_intent,
     intent_definition,
     region_definition,
+    unmeetable,
 )
 from planner.intent_pieces import keep_out, table_under
 from planner.labels import grasp_part
@@ -123,7 +124,9 @@ class FunctionalPlanner:
             shaped = partial(self._intent_program, obj, meaning)
         times = {"build": build, "propose": propose_time}
         programs = (program, shaped)
-        return self._run(obj, instruction, part, meaning is not None, proposals, programs, times)
+        unmet = None if meaning is None else unmeetable(obj, meaning)
+        checked = meaning is not None
+        return self._run(obj, instruction, part, checked, proposals, programs, times, unmet=unmet)
 
     def proposer_for(self, obj: ObjectModel, instruction: Instruction | str) -> str:
         """The proposer to use, "model" or "learned": `settings.proposer`, with "auto"
@@ -263,6 +266,11 @@ class FunctionalPlanner:
         voter = None
         if part is None and s.learned.region_vote > 0 and not direct:
             voter = region_object(obj, drawn.anchors, s.learned.region_vote, 1)
+        # where the intent is measured on the part's labels (the object's or the model's),
+        # whether it can be met there at all
+        unmet = None
+        if meaning is not None and region is None and (known or labels is not None):
+            unmet = unmeetable(obj if labels is None else labels.obj, meaning)
         result = self._run(
             obj,
             instruction,
@@ -275,6 +283,7 @@ class FunctionalPlanner:
             later,
             region,
             None if labels is None else labels.obj,
+            unmet,
         )
         result.understood = understood.to_dict()
         if labels is not None:
@@ -317,6 +326,7 @@ class FunctionalPlanner:
         later: Callable[[], list[Proposal]] | None = None,
         intent_region: ObjectModel | None = None,
         intent_object: ObjectModel | None = None,
+        unmet: str | None = None,
     ) -> PlanResult:
         """Solve, schedule and validate the proposals (planner.schedule). `programs`: the
         program, and what makes the program for proposals shaped by the intent with the count
@@ -329,8 +339,14 @@ class FunctionalPlanner:
         the time it takes goes to the last candidate solved before, as stage "region".
         `intent_region`: the intent is checked with it standing in for the part
         (planner.intent.check_configuration); `intent_object`: checked on it instead of `obj`
-        (the same points, labelled by the interaction model: planner.model_labels)."""
-        notes = []
+        (the same points, labelled by the interaction model: planner.model_labels).
+        `unmet`: why no grasp on the part can meet the intent (planner.intent.unmeetable):
+        the first grasp that holds on the part is returned, with no search for one meeting
+        it."""
+        notes = [] if unmet is None else [unmet]
+        settings = self.settings
+        if unmet is not None:
+            settings = replace(settings, schedule=replace(settings.schedule, intent_search=0))
         program, make_shaped = programs
         built: list[tuple[GraspProgram, int | None]] = []  # the shaped program, once made
 
@@ -397,7 +413,7 @@ class FunctionalPlanner:
 
         wanted = REGION_PART if voter is not None else part
         scheduled = run_schedule(
-            len(proposals), solve, validate, wanted, self.settings, more if later else None
+            len(proposals), solve, validate, wanted, settings, more if later else None
         )
         candidates = scheduled.candidates
         unsure = least_unsure(candidates, wanted)
@@ -409,32 +425,29 @@ class FunctionalPlanner:
                 )
             for cand in candidates:
                 cand.part = None
+        returned = scheduled.on_part or scheduled.fallback or unsure
         if scheduled.on_part is not None:
-            chosen = scheduled.on_part
             if scheduled.found is None:
                 notes.append(
                     f"no holding grasp on the {part or 'object'} met the {instruction.intent} "
                     "definition; "
-                    f"returning one that does not ({chosen.intent.reason})"
+                    f"returning one that does not ({returned.intent.reason})"
                 )
-            return PlanResult(instruction, self.hand.name, chosen.grasp, candidates, notes)
-        fallback = scheduled.fallback
-        if fallback is not None:
+        elif scheduled.fallback is not None:
             if voter is None:
                 notes.append(
                     f"no holding grasp touched the {part}; returning one that touches "
-                    f"{fallback.part}"
+                    f"{returned.part}"
                 )
-            return PlanResult(instruction, self.hand.name, fallback.grasp, candidates, notes)
-        if unsure is not None:
+        elif unsure is not None:
             checks = unsure.cloud_checks
             notes.append(
                 "no grasp passed the cloud checks; returning one that held on the cloud's own "
                 f"pieces but on only {checks['held']} of {checks['of']} other piece sets of it: "
                 "it may slip on the real object"
             )
-            return PlanResult(instruction, self.hand.name, unsure.grasp, candidates, notes)
-        return PlanResult(instruction, self.hand.name, None, candidates, notes)
+        grasp = None if returned is None else returned.grasp
+        return PlanResult(instruction, self.hand.name, grasp, candidates, notes, unmeetable=unmet)
 
     def _intent_program(
         self, obj: ObjectModel, meaning: Definition, labelled: ObjectModel | None = None

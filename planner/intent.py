@@ -41,6 +41,10 @@ from models.objects.intents import (
 )
 from planner.quality import contact_quality
 
+# m: a hand touching the object at a surface point has one of its own surface points within
+# this of it (the hand's 512 points are 3-6 mm apart; `unmeetable`)
+TOUCH_REACH = 0.006
+
 
 @dataclass(frozen=True)
 class Criterion:
@@ -513,6 +517,44 @@ def region_definition(region: ObjectModel, instruction: Instruction | str) -> De
     return intent_definition(region, ins)
 
 
+def unmeetable(obj: ObjectModel, meaning: Definition, rules: Rules = RULES) -> str | None:
+    """Why no grasp touching the instructed part can meet the definition on this object, or
+    None where one might. A hand touching the part at a surface point has a surface point of
+    its own within TOUCH_REACH of it, so where every point of the part lies nearer than a
+    clearance less TOUCH_REACH to a part the definition keeps clear (Handover's other parts,
+    Use's working parts), every such grasp fails it: a cup's or a bowl's rim is 7-8 mm deep,
+    and Handover asks 2 cm. Planning stops searching for such an intent once a grasp holds on
+    the part. On an object without the part's labels: None."""
+    if not obj.labelled:
+        return None
+    of = _object_facts(obj)
+    if meaning.part not in of.part_names or not of.mask(meaning.part).any():
+        return None
+    part = of.points[of.mask(meaning.part)]
+    kept: list[tuple[str, np.ndarray, float]] = []
+    if meaning.intent == "Handover":
+        clearance = rules.handover.other_part_clearance
+        for name in of.part_names:
+            if name != meaning.part and of.mask(name).any():
+                kept.append((f"the {name}", of.points[of.mask(name)], clearance))
+    elif meaning.intent == "Use":
+        for r in meaning.working:
+            kept.append((f"the {r.what}", of.region(r), rules.use.working_clearance))
+    if not kept:
+        return None
+    # the part's point farthest from everything kept clear, and how far that is
+    gaps = np.min([cKDTree(pts).query(part)[0] for _, pts, _ in kept if len(pts)], axis=0)
+    clearance = min(c for _, _, c in kept)
+    if float(gaps.max()) + TOUCH_REACH >= clearance:
+        return None
+    names = " and ".join(n for n, _, _ in kept)
+    return (
+        f"{meaning.intent} cannot be met on the {meaning.part}: every point of it lies within "
+        f"{_mm(float(gaps.max()))} of {names}, so no hand touching it keeps every point "
+        f"{_mm(clearance)} from {'them' if len(kept) > 1 else 'it'} as the definition asks"
+    )
+
+
 def check_configuration(
     wrist: np.ndarray,
     q: np.ndarray,
@@ -608,4 +650,5 @@ __all__ = [
     "mass_centre",
     "region_definition",
     "region_points",
+    "unmeetable",
 ]

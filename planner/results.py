@@ -127,6 +127,9 @@ class PlanResult:
     proposer: str = "model"  # where the proposals came from: "model" or "learned"
     # how the sentence was read (learned.understand.Understood.to_dict); None: parsed as given
     understood: dict[str, Any] | None = None
+    # why no grasp on the instructed part can meet the intent's definition on this object
+    # (planner.intent.unmeetable: a cup's rim for Handover); None: one may
+    unmeetable: str | None = None
 
     @property
     def best(self) -> CandidateResult | None:
@@ -187,6 +190,7 @@ class PlanResult:
             "part_touched": self.part_touched,
             "intent_ok": self.intent_ok,
             "intent": None if best is None or best.intent is None else best.intent.reason,
+            "intent_unmeetable": self.unmeetable,
             "anchor_error_mm": None if best is None else 1000 * best.solve.anchor_error,
             "candidates_solved": len(self.candidates),
             "candidates_validated": sum(c.order is not None for c in self.candidates),

@@ -162,3 +162,16 @@ def test_cloud_checks_table_counts_what_each_number_of_checks_keeps():
     assert lines[2] == "| leap | 0 | 3 | 3 | 2 (67%) | 0 of 0 |"
     assert lines[3] == "| leap | 1 | 3 | 2 | 1 (50%) | 1 of 1 |"
     assert lines[4] == "| leap | 2 | 3 | 1 | 1 (100%) | 1 of 2 |"
+
+
+def test_intent_is_also_given_where_the_definition_can_be_met():
+    def rec(ok, meetable):
+        r = benchmark.Record("model", "leap", "cup", 0, "Handover a cup by rim", "t", "rim")
+        r.returned_ok, r.intent_ok, r.intent_meetable = True, ok, meetable
+        return r
+
+    rows = benchmark.summarise([rec(True, True), rec(False, True), rec(False, False)])
+    assert round(rows[0]["intent"]) == 33 and rows[0]["intent_meetable"] == 50.0
+    assert "model leap 50% (1 pairs left out)" in benchmark.meetable_line(rows)
+    # records made before the field count as meetable; none left out, no line
+    assert benchmark.meetable_line(benchmark.summarise([rec(True, None)])) == ""

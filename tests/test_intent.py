@@ -20,6 +20,7 @@ from models.objects.intents import (
     CRITERIA,
     FINGER_ROLES,
     FINGERS,
+    RULES,
     check_tables,
     definition,
     definitions,
@@ -440,3 +441,44 @@ def test_faces_intent_reads_the_wrist_criteria_only(objects):
     assert not faces_intent(wrist_side, mug, hand, "Liftup a mug by body")
     # no criterion of Hold is decided by the wrist alone
     assert faces_intent(wrist_side, mug, hand, "Hold a mug by body")
+
+
+# ---- definitions no grasp on the part can meet -------------------------------------------------
+def test_handover_by_a_rim_cannot_be_met_and_says_why(objects):
+    cup = objects("cup")
+    reason = I.unmeetable(cup, intent_definition(cup, "Handover a cup by rim"))
+    assert reason is not None and "rim" in reason and "the body" in reason and "20 mm" in reason
+    # every rim point lies nearer the body than the clearance less a touch's reach
+    rim, body = part_points(cup, "rim"), part_points(cup, "body")
+    gaps = np.min(np.linalg.norm(rim[:, None] - body[None, ::4], axis=2), axis=1)
+    assert gaps.max() + I.TOUCH_REACH < RULES.handover.other_part_clearance + 0.002
+
+
+@pytest.mark.parametrize(
+    "cat, text",
+    [
+        ("mug", "Handover a mug by body"),
+        ("bottle", "Handover a bottle by neck"),  # 2-3 cm long: not ruled out by the shape
+        ("knife", "Use a knife by handle"),
+        ("mug", "Hold a mug by body"),
+        ("mug", "Liftup a mug by handle"),
+    ],
+)
+def test_definitions_that_a_grasp_on_the_part_may_meet(objects, cat, text):
+    obj = objects(cat)
+    assert I.unmeetable(obj, intent_definition(obj, text)) is None
+
+
+def test_a_use_part_inside_a_working_parts_clearance_cannot_be_met(objects):
+    """Use keeps the working parts 1 cm clear: a part no deeper than that from one is ruled
+    out, with a looser rule nothing is."""
+    from dataclasses import replace as changed
+
+    from models.objects.intents import Region, UseRule
+
+    cup = objects("cup")
+    meaning = changed(
+        intent_definition(cup, "Use a cup by body"), part="rim", working=(Region("body", "wall"),)
+    )
+    assert "wall" in I.unmeetable(cup, meaning, changed(RULES, use=UseRule(working_clearance=0.02)))
+    assert I.unmeetable(cup, meaning) is None  # 10 mm: within a touch's reach of 8 mm deep

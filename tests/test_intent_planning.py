@@ -263,3 +263,21 @@ def test_handover_keep_out_grows_the_other_parts_where_the_held_part_stays_outsi
     # a bottle's body and cap, each grown by 2 cm, cover most of its neck between them
     assert keep_out(make_object("bottle", 0), definition("bottle", "Handover", "neck")) == []
     assert keep_out(knife, definition("knife", "Handover", "blade"), handover=False) == []
+
+
+def test_an_intent_the_part_cannot_meet_stops_at_the_first_hold(monkeypatch):
+    """Handover by a cup's rim (planner.intent.unmeetable): the first grasp that holds on the
+    rim is returned, the reason first among the notes, with no search for one meeting it; on a
+    part where the intent may be met the search goes on."""
+    _fake(monkeypatch, intent_ok=lambda r: False, holds=lambda r: True)
+    settings = PlannerSettings(
+        schedule=ScheduleSettings(solve_batch=4, sweep_after=None),
+        proposals=ProposalSettings(max_proposals=12),
+    )
+    planner = FunctionalPlanner("allegro", settings)
+    result = planner.plan(make_object("cup", 0), "Handover a cup by rim")
+    assert result.success and result.intent_ok is False and result.best.rank == 0
+    assert result.unmeetable and result.notes[0] == result.unmeetable
+    assert len(result.candidates) == 4  # one batch
+    searched = planner.plan(make_object("mug", 0), "Handover a mug by body")
+    assert searched.unmeetable is None and len(searched.candidates) > 4
