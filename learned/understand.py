@@ -5,9 +5,11 @@ records and its intent check speak in "[Intent] a [Object] by [Part]" (the instr
 models.objects.instructions.TABLE). `understand` embeds the sentence with the same encoder the
 models use (learned.text) and returns the table's instruction whose training rewordings lie
 closest on average. Sentence embeddings weigh the object and part far above the verb ("grab
-the mug by its handle" sits nearer Liftup than Hold), so where the sentence names the verbs of
-exactly one intent (learned.paraphrase's training and evaluation verbs, "pick up", "hand"), only
-that intent's instructions are considered. A sentence that already parses keeps its parse: the
+the mug by its handle" sits nearer Liftup than Hold), so where the sentence names an intent's
+verbs (learned.paraphrase's training and evaluation verbs, "pick up", "hand"), only that
+intent's instructions are considered; where it names several, the first one's: a request's own
+verb comes first, and a later one says how the part is held ("hoist this mug? Grasp it at the
+handle"). A sentence that already parses keeps its parse: the
 table is consulted only for what the parser cannot read.
 """
 
@@ -82,15 +84,23 @@ def table_embeddings() -> tuple[list[Instruction], np.ndarray]:
         return _table
 
 
-def named_intents(text: str) -> set[str]:
-    """The intents whose verbs (training or evaluation wordings) occur in `text` as words."""
+# a word after these is a noun, not a verb ("your hand", "the use", "a good grip")
+DETERMINERS = ("a", "an", "the", "my", "your", "his", "her", "its", "our", "their", "this", "that")
+
+
+def named_intents(text: str) -> list[str]:
+    """The intents whose verbs (training or evaluation wordings) occur in `text` as verbs, in
+    the order they first occur; a verb's word right after a determiner is taken as a noun."""
     words = " " + re.sub(r"[^a-z]+", " ", text.lower()) + " "
-    return {
-        intent
-        for intent in TRAIN_VERBS
-        for verb in TRAIN_VERBS[intent] + EVAL_VERBS[intent]
-        if f" {verb} " in words
-    }
+    first: dict[str, int] = {}
+    for intent in TRAIN_VERBS:
+        for verb in TRAIN_VERBS[intent] + EVAL_VERBS[intent]:
+            for found in re.finditer(f" {verb} ", words):
+                before = words[: found.start()].split()
+                if not before or before[-1] not in DETERMINERS:
+                    first[intent] = min(found.start(), first.get(intent, found.start()))
+                    break
+    return sorted(first, key=first.get)
 
 
 def understand(text: str) -> Understood:
@@ -111,8 +121,8 @@ def understand(text: str) -> Understood:
     table, means = table_embeddings()
     sims = means @ encode([text])[0]
     named = named_intents(text)
-    if len(named) == 1:
-        sims = np.where([i.intent in named for i in table], sims, -2.0)
+    if named:  # the request's own verb comes first ("hoist this mug? Grasp it at the handle")
+        sims = np.where([i.intent == named[0] for i in table], sims, -2.0)
     order = np.argsort(-sims)
     best, second = int(order[0]), int(order[1])
     return Understood(

@@ -29,10 +29,21 @@ def test_a_parsed_instruction_is_kept_and_a_free_sentence_is_read_by_meaning():
     assert not read.parsed and read.instruction.text == "Use a spray bottle by trigger"
     assert read.similarity > read.runner_up_similarity
     # the verb decides the intent where the embedding would not
-    assert named_intents("pick up the bottle from the top") == {"Liftup"}
+    assert named_intents("pick up the bottle from the top") == ["Liftup"]
     assert understand("pick up the bottle from the top").instruction.intent == "Liftup"
     with pytest.raises(InstructionError, match="empty"):
         understand("   ")
+
+
+def test_the_request_s_own_verb_decides_over_how_the_part_is_held():
+    """The first verb names the intent; a later one says how the part is held ("Grasp it at
+    the handle"), and a verb's word after a determiner is a noun ("your hand")."""
+    text = "Would you kindly hoist this mug? Grasp it at the handle."
+    assert named_intents(text) == ["Liftup", "Hold"]
+    assert understand(text).instruction.text == "Liftup a mug by handle"
+    assert named_intents("Could you hand me the knife? Hold it by the blade.")[0] == "Handover"
+    assert named_intents("with your hand on the handle, use the knife") == ["Use"]
+    assert understand("with your hand on the handle, use the knife").instruction.intent == "Use"
 
 
 def test_auto_takes_the_model_for_labelled_parsed_input_and_learned_otherwise():
