@@ -51,3 +51,13 @@ def test_blank_instruction_refused(bad: str) -> None:
 def test_non_text_refused() -> None:
     with pytest.raises(InstructionError):
         text.encode([None])  # type: ignore[list-item]
+
+
+def test_reading_back_counts_right_intents_and_misreadings():
+    from eval.understanding import read_back
+    from learned.paraphrase import eval_paraphrases
+
+    canonical = read_back("canonical", lambda req: [f"{req.intent} a {req.noun} by {req.part}"])
+    assert canonical.sentences == canonical.intent_right == canonical.instruction_right > 50
+    hoist = read_back("hoist", lambda req: eval_paraphrases(req)[:1])
+    assert hoist.intent_right == hoist.sentences and not hoist.confusions
