@@ -103,6 +103,39 @@ def named_intents(text: str) -> list[str]:
     return sorted(first, key=first.get)
 
 
+def _named(phrase: str, words: list[str]) -> list[str]:
+    """The words (single or several) that `phrase` contains as whole words, longest first."""
+    padded = f" {phrase} "
+    return sorted((w for w in words if f" {w} " in padded), key=len, reverse=True)
+
+
+def repaired(instruction: Instruction) -> Instruction | None:
+    """A parse as it stands, or mended where it caught a clause in its object or part ("pick
+    up the mug and hold it by the handle": object "mug and hold it"; "by the stem and lift it"):
+    the library category or part the phrase names, the longest where several match ("spray
+    bottle" over "bottle"); None where the phrase names none or is ambiguous (read by meaning
+    instead). A user's own object or part word ("Use a widget by knob") stands."""
+    ins = instruction
+    if ins.category is None:
+        by_noun = {c.noun: name for name, c in CATEGORIES.items()}
+        by_noun |= {noun + "s": name for noun, name in list(by_noun.items())}
+        found = _named(ins.object, list(by_noun))
+        if not found:
+            return ins
+        if len(found) > 1 and found[1] not in found[0]:
+            return None
+        category = by_noun[found[0]]
+        ins = Instruction(ins.intent, CATEGORIES[category].noun, ins.part, category)
+    parts = CATEGORIES[ins.category].parts
+    if ins.part in parts:
+        return ins
+    by_word = {p: p for p in parts} | {p + "s": p for p in parts}  # "by their necks"
+    found = {by_word[w] for w in _named(ins.part, list(by_word))}
+    if len(found) != 1:
+        return ins if ins is instruction and not found else None
+    return Instruction(ins.intent, ins.object, found.pop(), ins.category)
+
+
 def understand(text: str) -> Understood:
     """The instruction `text` asks for: its parse where it parses, else the nearest table
     instruction by meaning. Raises InstructionError for an empty or overlong text."""
@@ -114,7 +147,9 @@ def understand(text: str) -> Understood:
             'handle" or "grab the mug by its handle"'
         )
     try:
-        return Understood(text, parse_instruction(text), parsed=True)
+        parsed = repaired(parse_instruction(text))
+        if parsed is not None:
+            return Understood(text, parsed, parsed=True)
     except InstructionError as err:
         if "characters long" in str(err):
             raise

@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from learned.understand import named_intents, understand
+from learned.understand import named_intents, repaired, understand
 from models.errors import InstructionError, PlanningError
 from models.hands import load_hand
-from models.objects import load_object, make_object
+from models.objects import load_object, make_object, parse_instruction
 from planner import plan_grasp
 from planner.functional import FunctionalPlanner, PlannerSettings
 from planner.learned_proposer import pointed_region, sample_start
@@ -44,6 +44,24 @@ def test_the_request_s_own_verb_decides_over_how_the_part_is_held():
     assert named_intents("Could you hand me the knife? Hold it by the blade.")[0] == "Handover"
     assert named_intents("with your hand on the handle, use the knife") == ["Use"]
     assert understand("with your hand on the handle, use the knife").instruction.intent == "Use"
+
+
+@pytest.mark.parametrize(
+    "text, read",
+    [
+        ("pick up the mug and hold it by the handle", "Liftup a mug by handle"),
+        ("hold the wine glass by the stem and lift it", "Hold a wine glass by stem"),
+        ("lift up the bottles by their necks", "Liftup a bottle by neck"),
+        ("Use a coffee mug by handle", "Use a mug by handle"),
+        ("Use a widget by knob", "Use a widget by knob"),  # a user's own words stand
+    ],
+)
+def test_a_parse_that_caught_a_clause_is_mended(text, read):
+    assert understand(text).instruction.text == read
+    assert repaired(parse_instruction("Use a spray bottle and more by trigger")).category == (
+        "spray_bottle"
+    )
+    assert repaired(parse_instruction("Hold a mug by handle or body")) is None  # by meaning
 
 
 def test_auto_takes_the_model_for_labelled_parsed_input_and_learned_otherwise():
