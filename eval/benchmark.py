@@ -493,7 +493,24 @@ def main(argv: list[str] | None = None) -> int:
     )
     p.add_argument("--workers", type=int, default=1)
     p.add_argument("--out", default="runs/benchmark", help="records, summary, table, plot")
+    p.add_argument(
+        "--join",
+        nargs="+",
+        default=None,
+        metavar="DIR",
+        help="plan nothing: print the table of these runs' records (their --out folders) "
+        "joined, a later run's record replacing an earlier one's of the same pair, method and "
+        "sample seed (a run of some intents, --intents, over a whole run)",
+    )
     args = p.parse_args(argv)
+    if args.join:
+        missing = [f for f in args.join if not (Path(f) / "records.jsonl").is_file()]
+        if missing:
+            raise SystemExit(f"--join: no records.jsonl in {', '.join(missing)}")
+        joined = {r.key: r for folder in args.join for r in _read(Path(folder) / "records.jsonl")}
+        rows = summarise(list(joined.values()))
+        print(table(rows, args.candidates) + meetable_line(rows) + uncertain_line(rows))
+        return 0
     hands = args.hands or available_hands()
     for h in hands:
         load_hand(h)  # an unknown hand fails here, before any work

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import asdict
 
 import pytest
 
@@ -175,3 +176,24 @@ def test_intent_is_also_given_where_the_definition_can_be_met():
     assert "model leap 50% (1 pairs left out)" in benchmark.meetable_line(rows)
     # records made before the field count as meetable; none left out, no line
     assert benchmark.meetable_line(benchmark.summarise([rec(True, None)])) == ""
+
+
+def test_join_prints_runs_joined_a_later_record_replacing_an_earlier(tmp_path, capsys):
+    def run(name, *records):
+        folder = tmp_path / name
+        folder.mkdir()
+        lines = [json.dumps(asdict(r)) for r in records]
+        (folder / "records.jsonl").write_text("\n".join(lines) + "\n")
+        return str(folder)
+
+    def rec(instruction, first):
+        r = benchmark.Record("learned", "leap", "mug", 0, instruction, "t", "handle")
+        r.first_ok = r.returned_ok = first
+        return r
+
+    whole = run("whole", rec("Use a mug by handle", True), rec("Liftup a mug by handle", False))
+    liftup = run("liftup", rec("Liftup a mug by handle", True))
+    assert benchmark.main(["--join", whole, liftup]) == 0
+    assert "| learned | leap | 2 | 100% | 100% |" in capsys.readouterr().out
+    with pytest.raises(SystemExit, match="no records"):
+        benchmark.main(["--join", str(tmp_path / "none")])
