@@ -21,7 +21,9 @@ method:
 - held: the returned grasp holds, on any part; part accuracy: held on the instructed part
   among the held;
 - meets intent: among the grasps held on the instructed part, the share that meet the
-  instruction's intent definition (planner.intent, checked on the labelled object);
+  instruction's intent definition (planner.intent, checked on the labelled object); below the
+  table, the same over the pairs whose definition can be met on their part at all
+  (planner.intent.unmeetable: not Handover by a cup's or a bowl's rim);
 - time: median wall time per pair, and per stage.
 
 `--seeds 0 1 2` plans every pair once per sample seed of the learned methods and pools them:
@@ -38,7 +40,8 @@ seen faces' labels) and validates the chosen grasps in MuJoCo against the full o
 cloud` does the same with 4096 random surface points (a complete scan, collision pieces made
 from the cloud, as for drograsp demo's clouds). Records go to OUT/records.jsonl as they finish,
 so an interrupted run resumes; OUT/summary.json, OUT/table.md and OUT/bars.png are written at
-the end.
+the end. `--join RUN_A RUN_B` prints the table of two runs' records joined (RUN_B's replacing
+RUN_A's for the same pair, method and seed: a run of some intents over a whole run).
 """
 
 from __future__ import annotations
