@@ -531,27 +531,29 @@ def unmeetable(obj: ObjectModel, meaning: Definition, rules: Rules = RULES) -> s
     if meaning.part not in of.part_names or not of.mask(meaning.part).any():
         return None
     part = of.points[of.mask(meaning.part)]
-    kept: list[tuple[str, np.ndarray, float]] = []
+    # the trees the checks themselves measure with (_others_clear, _working), cached per object
     if meaning.intent == "Handover":
+        others = ~of.mask(meaning.part)
+        if not others.any():
+            return None
         clearance = rules.handover.other_part_clearance
-        for name in of.part_names:
-            if name != meaning.part and of.mask(name).any():
-                kept.append((f"the {name}", of.points[of.mask(name)], clearance))
-    elif meaning.intent == "Use":
-        for r in meaning.working:
-            kept.append((f"the {r.what}", of.region(r), rules.use.working_clearance))
-    if not kept:
+        present = sorted(set(of.labels[others].tolist()))
+        names = " and ".join(f"the {of.part_names[k]}" for k in present)
+        trees = [of.tree_of(("not", meaning.part), of.points[others])]
+    elif meaning.intent == "Use" and meaning.working:
+        clearance = rules.use.working_clearance
+        names = " and ".join(f"the {r.what}" for r in meaning.working)
+        trees = [of.tree_of(("region", r), of.region(r)) for r in meaning.working]
+    else:
         return None
-    # the part's point farthest from everything kept clear, and how far that is
-    gaps = np.min([cKDTree(pts).query(part)[0] for _, pts, _ in kept if len(pts)], axis=0)
-    clearance = min(c for _, _, c in kept)
-    if float(gaps.max()) + TOUCH_REACH >= clearance:
+    # how far the part's point farthest from everything kept clear lies from it
+    depth = float(np.min([tree.query(part)[0] for tree in trees], axis=0).max())
+    if depth + TOUCH_REACH >= clearance:
         return None
-    names = " and ".join(n for n, _, _ in kept)
     return (
         f"{meaning.intent} cannot be met on the {meaning.part}: every point of it lies within "
-        f"{_mm(float(gaps.max()))} of {names}, so no hand touching it keeps every point "
-        f"{_mm(clearance)} from {'them' if len(kept) > 1 else 'it'} as the definition asks"
+        f"{_mm(depth)} of {names}, so no hand touching it keeps every point {_mm(clearance)} "
+        f"from {'them' if ' and ' in names else 'it'} as the definition asks"
     )
 
 
