@@ -464,7 +464,15 @@ class FunctionalPlanner:
             extra.append(table_under(obj))
         intent = self.settings.intent
         parts = obj if labelled is None else labelled
-        extra.extend(keep_out(parts, meaning, intent.use_keep_out, intent.handover_keep_out))
+        extra.extend(
+            keep_out(
+                parts,
+                meaning,
+                intent.use_keep_out,
+                intent.handover_keep_out,
+                intent.handover_keep_out_outside,
+            )
+        )
         program = grasp_program(self.hand, own + extra, replace(self.settings.program, **changes))
         return program, len(own) if extra else None
 

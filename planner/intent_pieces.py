@@ -27,15 +27,19 @@ def table_under(obj: ObjectModel) -> np.ndarray:
 
 
 def keep_out(
-    obj: ObjectModel, meaning: Definition, use: bool = True, handover: bool = True
+    obj: ObjectModel,
+    meaning: Definition,
+    use: bool = True,
+    handover: bool = True,
+    outside: float = 0.3,
 ) -> list[np.ndarray]:
     """Collision pieces that keep the whole hand, not only the anchors the proposals place,
     clear of what the intent leaves free (none on an unlabelled object): for Use (`use`) each
     working part (a cup's opening, a glass's bowl, a knife's blade) grown by the working
     clearance; for Handover (`handover`) each other part grown by the other-part clearance,
-    where that leaves at least half of the held part outside (a knife's handle for its
-    blade; not a cup's body, which grown by 2 cm swallows its rim), and none where together
-    they leave less than half of it (a bottle's neck between its body and cap)."""
+    where that leaves at least the share `outside` of the held part outside (a knife's handle
+    for its blade; not a cup's body, which grown by 2 cm swallows its rim), and none where
+    together they leave less of it (a bottle's neck between its body and cap)."""
     if not obj.labelled:
         return []
     if meaning.intent == "Use" and use:
@@ -52,12 +56,12 @@ def keep_out(
             continue
         hull = grown_hull(obj.points[labels == i], RULES.handover.other_part_clearance)
         inside = None if hull is None else inside_hull(hull, held)
-        if inside is not None and inside.mean() < 0.5:
+        if inside is not None and inside.mean() < 1 - outside:
             pieces.append(hull)
             covered |= inside
     # no room left on the held part between them (a bottle's neck between its body and cap):
     # the solves could not meet them, only spend SNOPT's iterations trying
-    return pieces if covered.mean() < 0.5 else []
+    return pieces if covered.mean() < 1 - outside else []
 
 
 _GROWTH = np.array([d for d in np.ndindex(3, 3, 3) if d != (1, 1, 1)], dtype=float) - 1

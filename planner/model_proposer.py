@@ -193,27 +193,7 @@ class ModelProposer:
         above and at 45-degree steps from it."""
         s = self.settings.intent
         down = np.array([0.0, 0.0, -1.0])
-        dirs = [down]
-        tilt = np.deg2rad(s.liftup_tilt_deg)
-        for k in range(s.liftup_azimuths if tilt > 0 else 0):
-            a = 2 * np.pi * k / s.liftup_azimuths
-            dirs.append(
-                np.array([np.sin(tilt) * np.cos(a), np.sin(tilt) * np.sin(a), -np.cos(tilt)])
-            )
-        frames = []
-        for v in dirs:
-            v = rounded(v)
-            base = next(
-                (b - (b @ v) * v for b in (e1, e2) if np.linalg.norm(b - (b @ v) * v) > 0.5),
-                np.cross(v, [1.0, 0.0, 0.0]),
-            )
-            base = base / np.linalg.norm(base)
-            for turn in np.deg2rad([0.0, 45.0, 90.0, 135.0]):
-                axis = rounded(
-                    Rotation.from_rotvec(turn * v).apply(base)
-                )  # stays perpendicular to v
-                frames += [(v, axis, 1.0), (v, axis, -1.0)]
-        return frames
+        return _cap_frames(down, s.liftup_tilt_deg, s.liftup_azimuths, e1, e2)
 
     def _shape(
         self,
@@ -261,6 +241,14 @@ class ModelProposer:
             far = pts[away][np.argmin(pts[away] @ toward)]
             target = held + ((far - held) @ toward) * toward
             frames = [f for f in shape.frames if f[0] @ toward >= -0.2] or shape.frames
+            end_on = self.settings.intent.handover_end_on
+            if end_on != "off" and _width_across(pts[away], toward) <= self.geometry.span:
+                # the palm beyond the held part's far end, facing the receiver's parts: the
+                # whole hand then stays on the held part's side (a pen's cap, a knife's blade,
+                # a hammer's head); only where the allowed points fit between thumb and fingers
+                tilt = self.settings.intent.liftup_tilt_deg
+                cap = _cap_frames(toward, tilt, self.settings.intent.liftup_azimuths, *axes[:2])
+                frames = cap if end_on == "only" else frames + cap
             return _Shape(away, frames, target=target, mix=True, shaped_rows=True)
         if intent.intent == "Liftup":
             height = pts[:, 2]
@@ -420,6 +408,52 @@ class ModelProposer:
             None if palm_target is None else rounded(palm_target),
             kind="pinch" if pinch else "row",
         )
+
+
+def _cap_frames(
+    direction: np.ndarray, tilt_deg: float, azimuths: int, e1: np.ndarray, e2: np.ndarray
+) -> list[tuple]:
+    """Frames with the palm facing `direction` (palm -> object; straight, and tilted by
+    `tilt_deg` at `azimuths` azimuths around it), the finger row along e1 (or e2, where e1 is
+    nearly along the palm direction) as seen along it and at 45-degree steps from that."""
+    direction = direction / np.linalg.norm(direction)
+    # the tilts' azimuth 0 toward world x (y where the direction is near x): for straight
+    # down, side x and other y
+    ref = np.array([1.0, 0.0, 0.0]) if abs(direction[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    side = ref - (ref @ direction) * direction
+    side /= np.linalg.norm(side)
+    other = np.cross(side, direction)
+    dirs = [direction]
+    tilt = np.deg2rad(tilt_deg)
+    for k in range(azimuths if tilt > 0 else 0):
+        a = 2 * np.pi * k / azimuths
+        dirs.append(
+            np.cos(tilt) * direction + np.sin(tilt) * (np.cos(a) * side + np.sin(a) * other)
+        )
+    frames = []
+    for v in dirs:
+        v = rounded(v)
+        base = next(
+            (b - (b @ v) * v for b in (e1, e2) if np.linalg.norm(b - (b @ v) * v) > 0.5),
+            np.cross(v, [1.0, 0.0, 0.0]),
+        )
+        base = base / np.linalg.norm(base)
+        for turn in np.deg2rad([0.0, 45.0, 90.0, 135.0]):
+            axis = rounded(Rotation.from_rotvec(turn * v).apply(base))  # perpendicular to v
+            frames += [(v, axis, 1.0), (v, axis, -1.0)]
+    return frames
+
+
+def _width_across(points: np.ndarray, direction: np.ndarray, steps: int = 12) -> float:
+    """The points' largest extent across the unit `direction` (within 1.5% of it: the widest
+    of `steps` directions in the plane perpendicular to it)."""
+    ref = np.array([1.0, 0.0, 0.0]) if abs(direction[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    a = ref - (ref @ direction) * direction
+    a /= np.linalg.norm(a)
+    b = np.cross(direction, a)
+    angles = np.linspace(0.0, np.pi, steps, endpoint=False)
+    dirs = np.outer(np.cos(angles), a) + np.outer(np.sin(angles), b)
+    return float(np.ptp(points @ dirs.T, axis=0).max())
 
 
 def _alternate(a: list[Proposal], b: list[Proposal]) -> list[Proposal]:

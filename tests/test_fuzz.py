@@ -26,6 +26,7 @@ def _check(report, minimum: int) -> None:
     assert set(GROUPS) == {o.group for o in report.outcomes}
 
 
+@pytest.mark.slow  # every entry point with every bad input: 17-27 s, beyond the default run's 5 minutes
 def test_fuzz_every_entry_point(tmp_path):
     """About 750 cases in about 20-40 s."""
     _check(run_fuzz(seed=0, scale=1, timeout=60.0, tmp=tmp_path), 700)

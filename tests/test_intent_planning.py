@@ -74,6 +74,43 @@ def test_handover_anchors_keep_clear_of_the_other_parts(hand_name, knife):
     assert np.concatenate([others.query(anchored(p))[0] for p in plain]).min() < needed
 
 
+def palm_directions(hand_name: str, proposals) -> np.ndarray:
+    normal = np.asarray(load_hand(hand_name).meta.palm.normal, dtype=float)
+    normal /= np.linalg.norm(normal)
+    return np.array(
+        [Rotation.from_quat(p.wrist[3:], scalar_first=True).apply(normal) for p in proposals]
+    )
+
+
+def test_handover_adds_end_on_frames_where_the_part_fits_the_hand(hand_name):
+    """A pen handed over by its cap gets proposals with the palm beyond the cap's end facing
+    the barrel (the whole hand on the cap's side); a pan's body, wider than any hand's span,
+    gets none; nor does the pen with the end-on frames off."""
+    settings = PlannerSettings()
+    near = np.cos(np.radians(settings.intent.liftup_tilt_deg + 1.0))
+
+    def facing(cat: str, part: str, end_on: str) -> np.ndarray:
+        obj = make_object(cat, 0)
+        held = obj.point_labels == obj.part_names.index(part)
+        toward = obj.points[~held].mean(axis=0) - obj.points[held].mean(axis=0)
+        toward /= np.linalg.norm(toward)
+        planner = FunctionalPlanner(
+            hand_name, PlannerSettings(intent=IntentSettings(handover_end_on=end_on))
+        )
+        shaped = planner.propose(obj, part, definition(cat, "Handover", part))
+        shaped = [p for p in shaped if p.shaped]
+        return palm_directions(hand_name, shaped) @ toward
+
+    assert (facing("pen", "cap", "both") >= near).any()
+    assert (facing("pen", "cap", "only") >= near).all()
+    assert not (facing("pen", "cap", "off") >= near).any()
+    assert not (facing("pan", "body", "both") >= near).any()
+    with pytest.raises(PlanningError, match="handover_end_on"):
+        IntentSettings(handover_end_on="sideways")
+    with pytest.raises(PlanningError, match="handover_keep_out_outside"):
+        IntentSettings(handover_keep_out_outside=0.0)
+
+
 def test_use_anchors_keep_clear_of_the_working_parts(hand_name, knife):
     meaning = definition("knife", "Use", "handle")
     blade = cKDTree(np.vstack([region_points(knife, r) for r in meaning.working]))
@@ -263,6 +300,12 @@ def test_handover_keep_out_grows_the_other_parts_where_the_held_part_stays_outsi
     # a bottle's body and cap, each grown by 2 cm, cover most of its neck between them
     assert keep_out(make_object("bottle", 0), definition("bottle", "Handover", "neck")) == []
     assert keep_out(knife, definition("knife", "Handover", "blade"), handover=False) == []
+    # a pen's cap lies within 2 cm of its barrel for just over half its length: the barrel's
+    # keep-out where 30% of the held part outside is enough (the default), none where half is
+    # asked (the tip's, at the pen's other end, either way)
+    pen, cap = make_object("pen", 0), definition("pen", "Handover", "cap")
+    assert len(keep_out(pen, cap)) == 2
+    assert len(keep_out(pen, cap, outside=0.5)) == 1
 
 
 def test_an_intent_the_part_cannot_meet_stops_at_the_first_hold(monkeypatch):

@@ -96,7 +96,15 @@ def test_processes_follow_the_setting_the_cores_and_pool_workers(monkeypatch):
         ScheduleSettings(solve_processes=0)
 
 
-@pytest.mark.parametrize("hand_name", ["allegro", "leap", "shadow"])
+# one hand in the default run (a plan solved twice: 5-8 s each), the others in the slow run
+@pytest.mark.parametrize(
+    "hand_name",
+    [
+        "allegro",
+        pytest.param("leap", marks=pytest.mark.slow),
+        pytest.param("shadow", marks=pytest.mark.slow),
+    ],
+)
 def test_a_plan_solved_in_two_processes_is_the_plan_solved_in_one(hand_name):
     cloud_mug = make_object("mug", 3)
     results = []
