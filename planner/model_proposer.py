@@ -208,7 +208,9 @@ class ModelProposer:
         Use: anchors a fingertip's width beyond the working clearance from the working parts.
         Handover: anchors 2 cm plus a fingertip's width from every other part (or 1 cm short of
         the part's farthest point from them, where it is smaller: a bottle's neck), toward the
-        part's end away from the receiver's parts, and the palm on the side away from them.
+        part's end away from the receiver's parts, and the palm on the side away from them:
+        beyond that end, facing them, where the allowed points fit in the hand's span
+        (`intent.handover_end_on`).
         Liftup: the palm facing down, anchors within `liftup_reach` below the part's top,
         `intent.liftup_toward_palm` up from the part's widest points. Hold: power grasps with
         the palm on the part (where it is as wide as the Hold rule asks) beside the regular
@@ -417,12 +419,8 @@ def _cap_frames(
     `tilt_deg` at `azimuths` azimuths around it), the finger row along e1 (or e2, where e1 is
     nearly along the palm direction) as seen along it and at 45-degree steps from that."""
     direction = direction / np.linalg.norm(direction)
-    # the tilts' azimuth 0 toward world x (y where the direction is near x): for straight
-    # down, side x and other y
-    ref = np.array([1.0, 0.0, 0.0]) if abs(direction[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    side = ref - (ref @ direction) * direction
-    side /= np.linalg.norm(side)
-    other = np.cross(side, direction)
+    # the tilts' azimuth 0 toward world x (for straight down: x, then y)
+    side, other = _plane_basis(direction)
     dirs = [direction]
     tilt = np.deg2rad(tilt_deg)
     for k in range(azimuths if tilt > 0 else 0):
@@ -444,13 +442,20 @@ def _cap_frames(
     return frames
 
 
-def _width_across(points: np.ndarray, direction: np.ndarray, steps: int = 12) -> float:
-    """The points' largest extent across the unit `direction` (within 1.5% of it: the widest
-    of `steps` directions in the plane perpendicular to it)."""
+def _plane_basis(direction: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit vectors spanning the plane perpendicular to the unit `direction`: world x
+    projected into it (world y where the direction is near x), then that turned a right angle
+    about `-direction`."""
     ref = np.array([1.0, 0.0, 0.0]) if abs(direction[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
     a = ref - (ref @ direction) * direction
     a /= np.linalg.norm(a)
-    b = np.cross(direction, a)
+    return a, np.cross(a, direction)
+
+
+def _width_across(points: np.ndarray, direction: np.ndarray, steps: int = 12) -> float:
+    """The points' largest extent across the unit `direction` (within 1.5% of it: the widest
+    of `steps` directions in the plane perpendicular to it)."""
+    a, b = _plane_basis(direction)
     angles = np.linspace(0.0, np.pi, steps, endpoint=False)
     dirs = np.outer(np.cos(angles), a) + np.outer(np.sin(angles), b)
     return float(np.ptp(points @ dirs.T, axis=0).max())

@@ -167,7 +167,6 @@ class IntentSettings:
     # hand stays clear of it, not only the anchors
     use_keep_out: bool = True
     # Handover: each other part's convex hull, grown by the other-part clearance, likewise
-    # (where it leaves at least half the held part outside it)
     handover_keep_out: bool = True
     # ... where at least this share of the held part lies outside the grown parts: at 0.3 (0.5
     # before) a pen's cap, within 2 cm of its barrel for about half its 37 mm, gets the
