@@ -23,8 +23,8 @@ method:
 - meets intent: among the grasps held on the instructed part, the share that meet the
   instruction's intent definition (planner.intent, checked on the labelled object); below the
   table, the same over the pairs whose definition can be met on their part at all
-  (planner.intent.unmeetable: not Handover by a cup's or a bowl's rim);
-- time: median wall time per pair, and per stage.
+  (planner.intent.unmeetable: not Handover by a cup's or a bowl's rim), and per intent;
+- time: median wall time per pair, and per stage (summary.json's `stage_median_s`).
 
 `--seeds 0 1 2` plans every pair once per sample seed of the learned methods and pools them:
 a solve is chaotic in its inputs (D(R,O) distances changed by 4e-8 m moved Allegro's first
@@ -344,6 +344,8 @@ def summarise(records: list[Record]) -> list[dict]:
                         100 * float(np.mean([r.intent_ok for r in meetable])) if meetable else 0.0
                     ),
                     "unmeetable_pairs": sum(r.intent_meetable is False for r in rs),
+                    # the intent column per intent, over the grasps held on the part
+                    "intent_by_intent": _by_intent(on_part),
                     "median_s": statistics.median(times) if times else float("nan"),
                     # the sample seeds pooled here, and first / within per seed: how far one
                     # run of the pairs moves from another (--seeds)
@@ -359,6 +361,17 @@ def summarise(records: list[Record]) -> list[dict]:
                 }
             )
     return rows
+
+
+def _by_intent(records: list[Record]) -> dict[str, float]:
+    """Per intent present, the % of its records meeting it (table order of INTENTS)."""
+    intents = [parse_instruction(r.instruction).intent for r in records]
+    return {
+        i: 100
+        * float(np.mean([r.intent_ok for r, j in zip(records, intents, strict=True) if j == i]))
+        for i in INTENTS
+        if i in intents
+    }
 
 
 def _by_seed(records: list[Record], flag: str) -> dict[int, float]:
@@ -409,6 +422,19 @@ def meetable_line(rows: list[dict]) -> str:
     return (
         "\nMeets intent, of the grasps held on the part where its definition can be met "
         f"(planner.intent.unmeetable): {shares}\n"
+    )
+
+
+def intent_line(rows: list[dict]) -> str:
+    """Below the table: the intent column per intent, per method and hand."""
+    shares = "; ".join(
+        f"{r['method']} {r['hand']} "
+        + ", ".join(f"{i} {v:.0f}%" for i, v in r.get("intent_by_intent", {}).items())
+        for r in rows
+        if r.get("intent_by_intent")
+    )
+    return (
+        f"\nMeets intent per intent, of the grasps held on the part: {shares}\n" if shares else ""
     )
 
 
@@ -512,7 +538,12 @@ def main(argv: list[str] | None = None) -> int:
             raise SystemExit(f"--join: no records.jsonl in {', '.join(missing)}")
         joined = {r.key: r for folder in args.join for r in _read(Path(folder) / "records.jsonl")}
         rows = summarise(list(joined.values()))
-        print(table(rows, args.candidates) + meetable_line(rows) + uncertain_line(rows))
+        print(
+            table(rows, args.candidates)
+            + meetable_line(rows)
+            + intent_line(rows)
+            + uncertain_line(rows)
+        )
         return 0
     hands = args.hands or available_hands()
     for h in hands:
@@ -570,6 +601,7 @@ def main(argv: list[str] | None = None) -> int:
     rows = summarise(records)
     text = table(rows, args.candidates)
     text += meetable_line(rows)
+    text += intent_line(rows)
     text += uncertain_line(rows)
     words = "evaluation-only rewordings" if args.paraphrase else "canonical instructions"
     seen = VIEWS[args.view]

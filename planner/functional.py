@@ -462,17 +462,7 @@ class FunctionalPlanner:
         extra = []
         if meaning.intent == "Liftup" and self.settings.intent.liftup_table:
             extra.append(table_under(obj))
-        intent = self.settings.intent
-        parts = obj if labelled is None else labelled
-        extra.extend(
-            keep_out(
-                parts,
-                meaning,
-                intent.use_keep_out,
-                intent.handover_keep_out,
-                intent.handover_keep_out_outside,
-            )
-        )
+        extra.extend(keep_out(obj if labelled is None else labelled, meaning, self.settings.intent))
         program = grasp_program(self.hand, own + extra, replace(self.settings.program, **changes))
         return program, len(own) if extra else None
 

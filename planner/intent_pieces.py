@@ -11,6 +11,7 @@ from models.objects import ObjectModel
 from models.objects.intents import RULES, Definition
 from models.reproducible import rounded
 from planner.intent import region_points
+from planner.settings import IntentSettings
 
 TABLE_GAP = 0.001  # m: the table's top above the object's lowest point (hand 1.5 mm above)
 
@@ -27,27 +28,26 @@ def table_under(obj: ObjectModel) -> np.ndarray:
 
 
 def keep_out(
-    obj: ObjectModel,
-    meaning: Definition,
-    use: bool = True,
-    handover: bool = True,
-    outside: float = 0.3,
+    obj: ObjectModel, meaning: Definition, settings: IntentSettings | None = None
 ) -> list[np.ndarray]:
     """Collision pieces that keep the whole hand, not only the anchors the proposals place,
-    clear of what the intent leaves free (none on an unlabelled object): for Use (`use`) each
-    working part (a cup's opening, a glass's bowl, a knife's blade) grown by the working
-    clearance; for Handover (`handover`) each other part grown by the other-part clearance,
-    where that leaves at least the share `outside` of the held part outside (a knife's handle
-    for its blade; not a cup's body, which grown by 2 cm swallows its rim), and none where
-    together they leave less of it (a bottle's neck between its body and cap)."""
+    clear of what the intent leaves free (none on an unlabelled object), as `settings` (None:
+    the defaults) asks: for Use (`use_keep_out`) each working part (a cup's opening, a glass's
+    bowl, a knife's blade) grown by the working clearance; for Handover (`handover_keep_out`)
+    each other part grown by the other-part clearance, where that leaves at least the share
+    `handover_keep_out_outside` of the held part outside (a knife's handle for its blade; not a
+    cup's body, which grown by 2 cm swallows its rim), and none where together they leave less
+    of it (a bottle's neck between its body and cap)."""
+    settings = settings or IntentSettings()
     if not obj.labelled:
         return []
-    if meaning.intent == "Use" and use:
+    if meaning.intent == "Use" and settings.use_keep_out:
         regions = [region_points(obj, r) for r in meaning.working]
         grown = [grown_hull(pts, RULES.use.working_clearance) for pts in regions]
         return [g for g in grown if g is not None]
-    if meaning.intent != "Handover" or not handover:
+    if meaning.intent != "Handover" or not settings.handover_keep_out:
         return []
+    outside = settings.handover_keep_out_outside
     labels = obj.point_labels
     held = obj.points[labels == obj.part_names.index(meaning.part)]
     pieces, covered = [], np.zeros(len(held), dtype=bool)

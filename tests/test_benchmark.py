@@ -176,6 +176,11 @@ def test_intent_is_also_given_where_the_definition_can_be_met():
     assert "model leap 50% (1 pairs left out)" in benchmark.meetable_line(rows)
     # records made before the field count as meetable; none left out, no line
     assert benchmark.meetable_line(benchmark.summarise([rec(True, None)])) == ""
+    # and the column per intent, in the table's order of intents
+    hold = benchmark.Record("model", "leap", "cup", 0, "Hold a cup by body", "t", "body")
+    hold.returned_ok, hold.intent_ok = True, True
+    rows = benchmark.summarise([rec(True, True), rec(False, True), hold])
+    assert "model leap Hold 100%, Handover 50%" in benchmark.intent_line(rows)
 
 
 def test_join_prints_runs_joined_a_later_record_replacing_an_earlier(tmp_path, capsys):

@@ -299,13 +299,18 @@ def test_handover_keep_out_grows_the_other_parts_where_the_held_part_stays_outsi
     assert keep_out(make_object("cup", 0), definition("cup", "Handover", "rim")) == []
     # a bottle's body and cap, each grown by 2 cm, cover most of its neck between them
     assert keep_out(make_object("bottle", 0), definition("bottle", "Handover", "neck")) == []
-    assert keep_out(knife, definition("knife", "Handover", "blade"), handover=False) == []
+    assert (
+        keep_out(
+            knife, definition("knife", "Handover", "blade"), IntentSettings(handover_keep_out=False)
+        )
+        == []
+    )
     # a pen's cap lies within 2 cm of its barrel for just over half its length: the barrel's
     # keep-out where 30% of the held part outside is enough (the default), none where half is
     # asked (the tip's, at the pen's other end, either way)
     pen, cap = make_object("pen", 0), definition("pen", "Handover", "cap")
     assert len(keep_out(pen, cap)) == 2
-    assert len(keep_out(pen, cap, outside=0.5)) == 1
+    assert len(keep_out(pen, cap, IntentSettings(handover_keep_out_outside=0.5))) == 1
 
 
 def test_an_intent_the_part_cannot_meet_stops_at_the_first_hold(monkeypatch):
