@@ -189,6 +189,9 @@ class _HandFacts:
 
 
 _OBJECTS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+# a region's facts with its object's centre of mass and bottom (`_region_facts`): kept apart
+# from the region's own (`_object_facts` of it, as `unmeetable` and the keep-outs take them)
+_REGIONS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 _HANDS: dict[tuple[str, str], _HandFacts] = {}
 
 
@@ -199,13 +202,14 @@ def _object_facts(obj: ObjectModel) -> _ObjectFacts:
 
 
 def _region_facts(obj: ObjectModel, region: ObjectModel) -> _ObjectFacts:
-    """The region's points and labels with the object's own centre of mass and lowest point
-    (a region object is a bare cloud: its mean is not the mass centre of a mesh)."""
-    if region not in _OBJECTS:
+    """The points and labels of `region` (a region object, or the object's points labelled by
+    the interaction model) with the object's own centre of mass and lowest point: `region` is
+    a bare cloud, whose point mean is not the mass centre of the object's mesh or pieces."""
+    if region not in _REGIONS:
         facts, shape = _ObjectFacts(region), _object_facts(obj)
         facts.com, facts.bottom = shape.com, shape.bottom
-        _OBJECTS[region] = facts
-    return _OBJECTS[region]
+        _REGIONS[region] = facts
+    return _REGIONS[region]
 
 
 def _hand_facts(hand: HandModel) -> _HandFacts:
@@ -392,7 +396,7 @@ def _closure(of, hf, cfg, rules) -> Criterion:
         "force_closure",
         eps >= rule.min_epsilon,
         float(eps),
-        f">= {rule.min_epsilon}",
+        f">= {rule.min_epsilon:.3g}",
         f"epsilon {eps:.3f} from {len(pts)} contacts",
     )
 
@@ -565,15 +569,20 @@ def check_configuration(
     instruction: Instruction | str,
     rules: Rules = RULES,
     region: ObjectModel | None = None,
+    labels: ObjectModel | None = None,
 ) -> IntentCheck:
     """`check_intent` on a bare configuration: wrist [x, y, z, qw, qx, qy, qz] and joints (for
-    solved candidates that were never validated). `region`: on an object without labels, the
-    region object that stands in for the part (`region_definition`); the object's own centre
-    of mass and lowest point are kept."""
-    if region is None:
-        d, of = intent_definition(obj, instruction), _object_facts(obj)
-    else:
+    solved candidates that were never validated). On an object without labels, `region`: the
+    region object that stands in for the part (`region_definition`), or `labels`: the
+    object's points with part labels guessed for them (planner.model_labels), on which the
+    definition is measured. Either way the object's own centre of mass and lowest point are
+    kept (Hold's epsilon is taken about the centre of mass)."""
+    if region is not None:
         d, of = region_definition(region, instruction), _region_facts(obj, region)
+    elif labels is not None:
+        d, of = intent_definition(labels, instruction), _region_facts(obj, labels)
+    else:
+        d, of = intent_definition(obj, instruction), _object_facts(obj)
     hf = _hand_facts(hand)
     cfg = _configure(hand, hf, np.asarray(wrist, dtype=float), np.asarray(q, dtype=float))
     return _evaluate(d, of, hf, cfg, rules)

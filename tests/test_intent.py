@@ -320,6 +320,29 @@ def test_hold_palm_contact(hand_name, objects):
     assert check["palm_contact"].passed and "not required" in check["palm_contact"].note
 
 
+def test_stricter_rules_tighten_the_limits_part_labels_decide(hand_name, objects):
+    """On guessed labels (planner.model_labels) the planner checks with Rules.stricter: a
+    palm that passes by 1 mm fails once the margin exceeds that; Liftup's limits stay."""
+    strict = RULES.stricter(0.003, 0.02)
+    assert strict.hold.palm_contact == pytest.approx(RULES.hold.palm_contact - 0.003)
+    assert strict.hold.min_epsilon == pytest.approx(RULES.hold.min_epsilon + 0.02)
+    assert strict.use.working_clearance == pytest.approx(RULES.use.working_clearance + 0.003)
+    assert strict.use.finger_contact == pytest.approx(RULES.use.finger_contact - 0.003)
+    assert strict.handover.other_part_clearance == pytest.approx(0.023)
+    assert strict.liftup == RULES.liftup and RULES.stricter(0, 0) == RULES
+
+    hand, mug = load_hand(hand_name), objects("mug")
+    body = part_points(mug, "body")
+    near = placed(hand, [body[:, 0].min() - 0.003, body[:, 1].mean(), 0.0], X, Z)
+    text = "Hold a mug by body"
+    gap = check_configuration(*near, mug, hand, text)["palm_contact"].value
+    slack = RULES.hold.palm_contact - gap
+    assert slack > 0.001
+    within = check_configuration(*near, mug, hand, text, RULES.stricter(slack - 0.001, 0))
+    beyond = check_configuration(*near, mug, hand, text, RULES.stricter(slack + 0.001, 0))
+    assert within["palm_contact"].passed and not beyond["palm_contact"].passed
+
+
 def test_hold_force_closure(hand_name, objects):
     hand, mug = load_hand(hand_name), objects("mug")
     facts, hf = I._object_facts(mug), I._hand_facts(hand)
@@ -427,6 +450,41 @@ def test_hold_is_measured_on_a_region_standing_in_for_the_part(objects):
         assert [c.value for c in on_region.criteria] == pytest.approx(
             [c.value for c in labelled.criteria]
         )
+
+
+def test_guessed_labels_are_measured_about_the_object_s_own_mass_centre(objects):
+    """On a bare object the interaction model's labels come as a labelled cloud of its points
+    (planner.model_labels); checked with `labels=`, Hold's epsilon is taken about the object's
+    mass centre (its pieces'), not the cloud's point mean, even where the cloud's own facts were
+    made first (as `unmeetable` and the keep-outs make them): with the true labels guessed, the
+    verdict is the labelled knife's."""
+    from dataclasses import replace
+
+    from models.objects import ObjectModel
+
+    hand, knife = load_hand("allegro"), objects("knife")
+    bare = replace(knife, face_labels=None, cloud_labels=None, part_names=(), _derived={})
+    guess = ObjectModel(
+        name="knife",
+        cloud=bare.points,
+        cloud_normals=bare.normals,
+        cloud_labels=knife.point_labels,
+        part_names=knife.part_names,
+        category="knife",
+    )
+    cloud_centre = I._object_facts(guess).com  # made first, as a plan does
+    assert np.linalg.norm(cloud_centre - mass_centre(knife)) > 0.005
+    handle = part_points(knife, "handle")
+    pose = placed(
+        hand, [handle[:, 0].mean(), handle[:, 1].mean(), handle[:, 2].max() + 0.004], -Z, X
+    )
+    text = "Hold a knife by handle"
+    truth = check_configuration(*pose, knife, hand, text)
+    guessed = check_configuration(*pose, bare, hand, text, labels=guess)
+    assert [c.value for c in guessed.criteria] == pytest.approx([c.value for c in truth.criteria])
+    assert truth["force_closure"].value != pytest.approx(
+        check_configuration(*pose, guess, hand, text)["force_closure"].value
+    )
 
 
 def test_faces_intent_reads_the_wrist_criteria_only(objects):
