@@ -24,7 +24,7 @@ from models.grasp import Grasp
 from models.hands import HandModel, load_hand
 from models.objects import Instruction, ObjectModel, parse_instruction
 from models.objects.completion import complete_view
-from models.objects.intents import RULES, WRIST_CRITERIA, Definition, label_free, region_checked
+from models.objects.intents import WRIST_CRITERIA, Definition, label_free, region_checked
 from models.reproducible import rounded
 from planner.grasp_program import GraspProgram, GraspTargets, SolveResult, grasp_program
 from planner.intent import (
@@ -339,8 +339,7 @@ class FunctionalPlanner:
         the time it takes goes to the last candidate solved before, as stage "region".
         `intent_region`: the intent is checked with it standing in for the part
         (planner.intent.check_configuration); `intent_object`: checked on its labels (the
-        object's points, labelled by the interaction model: planner.model_labels). On either,
-        with the stricter limits of `learned.label_margin`.
+        object's points, labelled by the interaction model: planner.model_labels).
         `unmet`: why no grasp on the part can meet the intent (planner.intent.unmeetable):
         the first grasp that holds on the part is returned, with no search for one meeting
         it."""
@@ -350,11 +349,6 @@ class FunctionalPlanner:
             settings = replace(settings, schedule=replace(settings.schedule, intent_search=0))
         program, make_shaped = programs
         built: list[tuple[GraspProgram, int | None]] = []  # the shaped program, once made
-        rules = RULES
-        if intent_region is not None or intent_object is not None:  # guessed parts
-            rules = RULES.stricter(
-                settings.learned.label_margin, settings.learned.label_epsilon_margin
-            )
 
         def shaped() -> tuple[GraspProgram, int | None]:
             if not built:
@@ -407,7 +401,6 @@ class FunctionalPlanner:
                     obj,
                     self.hand,
                     instruction,
-                    rules,
                     region=intent_region,
                     labels=intent_object,
                 )

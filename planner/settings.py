@@ -286,14 +286,6 @@ class LearnedSettings:
     # validation pairs it moved first samples by -23 to +16 points per hand and intent for no
     # clear intent gain (docs/learned_log.md)
     sample_keep_outs: bool = False
-    # where the intent is checked on guessed parts (the interaction model's labels, or the
-    # region the samples point at), its limits are this much stricter (models.objects.intents
-    # Rules.stricter): contacts with a part `label_margin` (m) nearer, clearances from one that
-    # much wider, Hold's force closure `label_epsilon_margin` higher. Of the 25 learned test
-    # plans (three seeds) whose grasp met its intent on the guessed labels and not on the
-    # true ones, 18 were within these margins of a limit (docs/learned_log.md)
-    label_margin: float = 0.003
-    label_epsilon_margin: float = 0.02
 
     def __post_init__(self) -> None:
         if self.solver not in LEARNED_SOLVERS:
@@ -307,9 +299,6 @@ class LearnedSettings:
             )
         if not self.held_reach >= 0:
             raise PlanningError(f"learned.held_reach must be >= 0 m, got {self.held_reach}")
-        for name in ("label_margin", "label_epsilon_margin"):
-            if not getattr(self, name) >= 0:
-                raise PlanningError(f"learned.{name} must be >= 0, got {getattr(self, name)}")
         if self.label_samples < 1:
             raise PlanningError(
                 f"learned.label_samples must be at least 1, got {self.label_samples}"

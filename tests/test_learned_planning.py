@@ -284,9 +284,6 @@ def test_hold_is_checked_on_a_bare_cloud_on_the_model_labels_or_the_pointed_regi
     for c in solved:
         assert c.intent is not None and c.intent.intent == "Hold"
         assert [x.name for x in c.intent.criteria] == ["palm_contact", "force_closure"]
-        # guessed parts: checked with the stricter limits (learned.label_margin, 3 mm and 0.02)
-        assert c.intent["palm_contact"].limit.startswith("<= 7 mm"), c.intent.reason
-        assert c.intent["force_closure"].limit == ">= 0.12"
     assert all(c.intent is None for c in planned(False).candidates)
 
 

@@ -80,15 +80,11 @@ def test_the_held_part_is_kept_near_its_seed_and_the_rest_goes_to_its_neighbours
     assert trim_held(points, np.zeros(11, int), seed, 0, 0.025).tolist() == [0] * 11
 
 
-def test_label_settings_are_validated():
+def test_label_samples_must_be_positive():
     with pytest.raises(PlanningError, match="label_samples"):
         LearnedSettings(label_samples=0)
     with pytest.raises(PlanningError, match="held_reach"):
         LearnedSettings(held_reach=float("nan"))
-    with pytest.raises(PlanningError, match="label_margin"):
-        LearnedSettings(label_margin=-0.001)
-    with pytest.raises(PlanningError, match="label_epsilon_margin"):
-        LearnedSettings(label_epsilon_margin=float("nan"))
 
 
 def test_other_parts_covered_counts_their_points_near_their_label():

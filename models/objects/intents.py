@@ -29,7 +29,7 @@ and the object's dense labelled surface points):
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 from ..errors import InstructionError
 from .instructions import INTENTS, TABLE
@@ -99,31 +99,6 @@ class Rules:
     hold: HoldRule = field(default_factory=HoldRule)
     handover: HandoverRule = field(default_factory=HandoverRule)
     liftup: LiftupRule = field(default_factory=LiftupRule)
-
-    def stricter(self, distance: float, epsilon: float) -> Rules:
-        """These rules with every limit that is measured against part labels tightened: a
-        contact with a part `distance` nearer, a clearance from one `distance` wider, force
-        closure (its contacts grouped by part) `epsilon` higher. For checks on labels that
-        are a guess (planner.model_labels): their boundaries lie a few millimetres off, and a
-        verdict near a limit then says "met" where the true labels say not. Liftup's
-        criteria use no labels and stay."""
-        use, hold, handover = self.use, self.hold, self.handover
-        return Rules(
-            use=replace(
-                use,
-                finger_contact=use.finger_contact - distance,
-                working_clearance=use.working_clearance + distance,
-            ),
-            hold=replace(
-                hold,
-                palm_contact=hold.palm_contact - distance,
-                min_epsilon=hold.min_epsilon + epsilon,
-            ),
-            handover=replace(
-                handover, other_part_clearance=handover.other_part_clearance + distance
-            ),
-            liftup=self.liftup,
-        )
 
 
 RULES = Rules()
