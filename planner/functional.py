@@ -325,7 +325,7 @@ class FunctionalPlanner:
         voter: ObjectModel | None = None,
         later: Callable[[], list[Proposal]] | None = None,
         intent_region: ObjectModel | None = None,
-        intent_object: ObjectModel | None = None,
+        intent_labels: ObjectModel | None = None,
         unmet: str | None = None,
     ) -> PlanResult:
         """Solve, schedule and validate the proposals (planner.schedule). `programs`: the
@@ -338,7 +338,7 @@ class FunctionalPlanner:
         proposals that follow these, if the search reaches them (planner.schedule `more`);
         the time it takes goes to the last candidate solved before, as stage "region".
         `intent_region`: the intent is checked with it standing in for the part
-        (planner.intent.check_configuration); `intent_object`: checked on its labels (the
+        (planner.intent.check_configuration); `intent_labels`: checked on its labels (the
         object's points, labelled by the interaction model: planner.model_labels).
         `unmet`: why no grasp on the part can meet the intent (planner.intent.unmeetable):
         the first grasp that holds on the part is returned, with no search for one meeting
@@ -402,7 +402,7 @@ class FunctionalPlanner:
                     self.hand,
                     instruction,
                     region=intent_region,
-                    labels=intent_object,
+                    labels=intent_labels,
                 )
                 cand.times["intent"] = time.perf_counter() - t0
             return cand

@@ -17,6 +17,7 @@ Imports: models, and planner.quality for the force-closure metric the planner it
 
 from __future__ import annotations
 
+import copy
 import weakref
 from collections.abc import Iterable
 from dataclasses import asdict, dataclass, replace
@@ -189,8 +190,8 @@ class _HandFacts:
 
 
 _OBJECTS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
-# a region's facts with its object's centre of mass and bottom (`_region_facts`): kept apart
-# from the region's own (`_object_facts` of it, as `unmeetable` and the keep-outs take them)
+# a region's facts with its object's centre of mass and bottom (`_region_facts`): a copy of
+# the region's own (`_object_facts` of it, as `unmeetable` and the keep-outs take them)
 _REGIONS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 _HANDS: dict[tuple[str, str], _HandFacts] = {}
 
@@ -206,7 +207,8 @@ def _region_facts(obj: ObjectModel, region: ObjectModel) -> _ObjectFacts:
     the interaction model) with the object's own centre of mass and lowest point: `region` is
     a bare cloud, whose point mean is not the mass centre of the object's mesh or pieces."""
     if region not in _REGIONS:
-        facts, shape = _ObjectFacts(region), _object_facts(obj)
+        # the region's own facts (its trees built once), with the object's mass centre and bottom
+        facts, shape = copy.copy(_object_facts(region)), _object_facts(obj)
         facts.com, facts.bottom = shape.com, shape.bottom
         _REGIONS[region] = facts
     return _REGIONS[region]
