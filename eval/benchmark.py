@@ -127,6 +127,8 @@ class Record:
     intent_meetable: bool | None = None
     understood: str | None = None
     candidates: int = 0
+    # proposals passed over unsolved in the search for the intent (PlanResult.passed)
+    passed: int = 0
     plan_time: float = 0.0
     stage_times: dict[str, float] = field(default_factory=dict)
     # every solved candidate (planner.results.CandidateResult.summary), with the proposal's
@@ -260,6 +262,7 @@ def run_task(task: Task) -> Record:
         rec.intent_ok = bool(check.ok)
     rec.understood = result.instruction.text
     rec.candidates = len(result.candidates)
+    rec.passed = len(result.passed)
     rec.stage_times = {k: round(v, 4) for k, v in result.stage_times().items()}
     for cand in result.candidates:
         summary = cand.summary()

@@ -18,6 +18,11 @@ policy sees only what the method saw (a learned plan has no part labels):
 
     python -m eval.replay runs/bl_all3/records.jsonl --method learned --set schedule.gate_solves=24
 
+Passing over proposals that will miss the intent (`schedule.pass_over_misses`, in the search
+after a grasp held off its intent) is not replayed: it needs each proposal's drawn wrist and
+the labels its intent was measured on, which records do not keep, so a replay is the policy
+with it off.
+
 `--retry OTHER.jsonl [...]` (records of the same pairs made with another squeeze,
 `--set program.squeeze_depth=D program.retry_squeeze_depths=[]`) replays squeeze retries at
 those depths in turn: a candidate that slips in RECORDS holds if it holds in one of them, as

@@ -31,6 +31,7 @@ from planner.intent import (
     check_configuration,
     faces_intent,
     intent_definition,
+    proposal_misses,
     region_definition,
     unmeetable,
 )
@@ -412,9 +413,21 @@ class FunctionalPlanner:
             if voter is not None:
                 cand.part = grasp_part(self.hand, cand.solve.wrist, cand.solve.q, voter)
 
+        misses = None
+        measured_on = intent_labels if intent_labels is not None else obj
+        if check_intent and intent_region is None and settings.schedule.pass_over_misses:
+            meaning = intent_definition(measured_on, instruction)
+            share = settings.schedule.miss_anchor_share
+
+            def misses(rank: int) -> str | None:
+                p = proposals[rank]
+                return proposal_misses(
+                    p.wrist, p.anchors, obj, self.hand, meaning, measured_on, share
+                )
+
         wanted = REGION_PART if voter is not None else part
         scheduled = run_schedule(
-            len(proposals), solve, validate, wanted, settings, more if later else None
+            len(proposals), solve, validate, wanted, settings, more if later else None, misses
         )
         candidates = scheduled.candidates
         unsure = least_unsure(candidates, wanted)
@@ -448,7 +461,15 @@ class FunctionalPlanner:
                 "it may slip on the real object"
             )
         grasp = None if returned is None else returned.grasp
-        return PlanResult(instruction, self.hand.name, grasp, candidates, notes, unmeetable=unmet)
+        return PlanResult(
+            instruction,
+            self.hand.name,
+            grasp,
+            candidates,
+            notes,
+            unmeetable=unmet,
+            passed=scheduled.passed,
+        )
 
     def _intent_program(
         self, obj: ObjectModel, meaning: Definition, labelled: ObjectModel | None = None

@@ -523,6 +523,29 @@ def region_definition(region: ObjectModel, instruction: Instruction | str) -> De
     return intent_definition(region, ins)
 
 
+def _kept_clear(
+    of: _ObjectFacts, meaning: Definition, rules: Rules
+) -> tuple[list[cKDTree], float, str] | None:
+    """What the definition keeps clear of the whole hand (Handover's other parts, Use's working
+    parts) as the trees its checks measure with (`_others_clear`, `_working`, cached per
+    object), the clearance it asks and their names; None where it keeps nothing clear."""
+    if meaning.part not in of.part_names or not of.mask(meaning.part).any():
+        return None
+    if meaning.intent == "Handover":
+        others = ~of.mask(meaning.part)
+        if not others.any():
+            return None
+        present = sorted(set(of.labels[others].tolist()))
+        names = " and ".join(f"the {of.part_names[k]}" for k in present)
+        trees = [of.tree_of(("not", meaning.part), of.points[others])]
+        return trees, rules.handover.other_part_clearance, names
+    if meaning.intent == "Use" and meaning.working:
+        names = " and ".join(f"the {r.what}" for r in meaning.working)
+        trees = [of.tree_of(("region", r), of.region(r)) for r in meaning.working]
+        return trees, rules.use.working_clearance, names
+    return None
+
+
 def unmeetable(obj: ObjectModel, meaning: Definition, rules: Rules = RULES) -> str | None:
     """Why no grasp touching the instructed part can meet the definition on this object, or
     None where one might. A hand touching the part at a surface point has a surface point of
@@ -534,24 +557,11 @@ def unmeetable(obj: ObjectModel, meaning: Definition, rules: Rules = RULES) -> s
     if not obj.labelled:
         return None
     of = _object_facts(obj)
-    if meaning.part not in of.part_names or not of.mask(meaning.part).any():
+    kept = _kept_clear(of, meaning, rules)
+    if kept is None:
         return None
+    trees, clearance, names = kept
     part = of.points[of.mask(meaning.part)]
-    # the trees the checks themselves measure with (_others_clear, _working), cached per object
-    if meaning.intent == "Handover":
-        others = ~of.mask(meaning.part)
-        if not others.any():
-            return None
-        clearance = rules.handover.other_part_clearance
-        present = sorted(set(of.labels[others].tolist()))
-        names = " and ".join(f"the {of.part_names[k]}" for k in present)
-        trees = [of.tree_of(("not", meaning.part), of.points[others])]
-    elif meaning.intent == "Use" and meaning.working:
-        clearance = rules.use.working_clearance
-        names = " and ".join(f"the {r.what}" for r in meaning.working)
-        trees = [of.tree_of(("region", r), of.region(r)) for r in meaning.working]
-    else:
-        return None
     # how far the part's point farthest from everything kept clear lies from it
     depth = float(np.min([tree.query(part)[0] for tree in trees], axis=0).max())
     if depth + TOUCH_REACH >= clearance:
@@ -561,6 +571,46 @@ def unmeetable(obj: ObjectModel, meaning: Definition, rules: Rules = RULES) -> s
         f"{_mm(depth)} of {names}, so no hand touching it keeps every point {_mm(clearance)} "
         f"from {'them' if ' and ' in names else 'it'} as the definition asks"
     )
+
+
+def proposal_misses(
+    wrist: np.ndarray,
+    anchors: np.ndarray,
+    obj: ObjectModel,
+    hand: HandModel,
+    meaning: Definition,
+    labels: ObjectModel | None,
+    anchor_share: float,
+    rules: Rules = RULES,
+) -> str | None:
+    """Why a proposal, as drawn (before its solve), will not meet the definition, or None
+    where it might: a fingertip placed on an anchor nearer a part the definition keeps clear
+    than `anchor_share` of the clearance it asks (Handover's 2 cm, Use's 1 cm) is deep inside
+    it, and a wrist that fails a criterion the wrist decides (Liftup's palm down, above the centre of
+    mass) is rarely turned by a solve that starts there. `labels`: the labelled object the
+    definition is measured on (the object itself or the interaction model's labels; None:
+    no anchor check). For the search after a grasp held off its intent (planner.schedule):
+    a guide to what is worth solving, not a verdict."""
+    if labels is not None and labels.labelled:
+        of = _object_facts(labels)
+        kept = _kept_clear(of, meaning, rules)
+        if kept is not None:
+            trees, clearance, names = kept
+            gap = float(
+                min(tree.query(np.asarray(anchors, dtype=float))[0].min() for tree in trees)
+            )
+            if gap < anchor_share * clearance:
+                return f"an anchor lies {_mm(gap)} from {names} ({_mm(clearance)} asked)"
+    from models.objects.intents import WRIST_CRITERIA
+
+    if WRIST_CRITERIA & set(meaning.criteria):
+        hf = _hand_facts(hand)
+        cfg = _configure(hand, hf, np.asarray(wrist, dtype=float), hand.open_pose)
+        check = _evaluate(meaning, _object_facts(obj), hf, cfg, rules)
+        failed = [c.name for c in check.criteria if c.name in WRIST_CRITERIA and not c.passed]
+        if failed:
+            return f"the drawn wrist fails {', '.join(failed)}"
+    return None
 
 
 def check_configuration(
@@ -661,6 +711,7 @@ __all__ = [
     "faces_intent",
     "intent_definition",
     "mass_centre",
+    "proposal_misses",
     "region_definition",
     "region_points",
     "unmeetable",

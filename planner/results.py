@@ -130,6 +130,9 @@ class PlanResult:
     # why no grasp on the instructed part can meet the intent's definition on this object
     # (planner.intent.unmeetable: a cup's rim for Handover); None: one may
     unmeetable: str | None = None
+    # proposals passed over unsolved in the search for a grasp meeting the intent after one
+    # held without it (planner.schedule, planner.intent.proposal_misses): rank -> why
+    passed: dict[int, str] = field(default_factory=dict)
 
     @property
     def best(self) -> CandidateResult | None:
@@ -193,6 +196,7 @@ class PlanResult:
             "intent_unmeetable": self.unmeetable,
             "anchor_error_mm": None if best is None else 1000 * best.solve.anchor_error,
             "candidates_solved": len(self.candidates),
+            "candidates_passed": len(self.passed),
             "candidates_validated": sum(c.order is not None for c in self.candidates),
             "chosen_rank": None if best is None else best.rank,
             "chosen_kind": None if best is None else best.proposal.kind,

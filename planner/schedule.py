@@ -10,7 +10,7 @@ compare policies without solving again.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from planner.results import CandidateResult
 from planner.settings import PlannerSettings
@@ -25,6 +25,8 @@ class Scheduled:
     # the first validated one that held on the instructed part but missed the intent: returned
     # when no candidate meets the intent
     off_intent: CandidateResult | None = None
+    # ranks passed over unsolved in the search for a grasp meeting the intent, with why
+    passed: dict[int, str] = field(default_factory=dict)
 
     @property
     def on_part(self) -> CandidateResult | None:
@@ -53,6 +55,7 @@ def run_schedule(
     part: str,
     settings: PlannerSettings,
     more: Callable[[], int] | None = None,
+    misses: Callable[[int], str | None] | None = None,
 ) -> Scheduled:
     """Solve proposals 0..count-1 a batch at a time and validate the solved candidates best
     first, until one holds on `part` and meets its intent, or `max_candidates` are validated
@@ -61,6 +64,9 @@ def run_schedule(
     `more`: proposals after the first `count` that are made only if the search reaches them
     (the learned proposer's region proposals: most plans end before): called at most once,
     when the first `count` are solved or the sweep begins, it makes them and says how many.
+    `misses`: why the proposal of a rank will not meet the intent as drawn, or None
+    (planner.intent.proposal_misses); consulted only in the search after a hold that missed
+    the intent, where such proposals are passed over unsolved (`Scheduled.passed`).
 
     Candidates whose solved configuration meets the intent (`intent_ok`, planner.intent) are
     validated before the others for the first `intent_first` validations; after them the
@@ -82,7 +88,9 @@ def run_schedule(
     found: CandidateResult | None = None
     fallback: CandidateResult | None = None
     off_intent: CandidateResult | None = None
+    passed: dict[int, str] = {}
     position = 0
+    following = 0  # the next proposal to solve or pass over
 
     def sweeping() -> bool:
         return s.sweep_after is not None and position >= s.sweep_after
@@ -117,7 +125,7 @@ def run_schedule(
     def searching() -> int:
         """Proposals still to solve: after a hold that missed the intent, `intent_search`
         more at most (the search for one meeting it is paid in solves)."""
-        left = count - len(candidates)
+        left = count - following
         if off_intent is None or s.validate_all or s.intent_search is None:
             return left
         return min(left, solved_at_off + s.intent_search - len(candidates))
@@ -125,15 +133,33 @@ def run_schedule(
     def remaining() -> int:
         """`searching()`, with the later proposals made (`more`) once they are due."""
         nonlocal count, more
-        if more is not None and (sweeping() or len(candidates) >= count):
+        if more is not None and (sweeping() or following >= count):
             count, more = count + more(), None
         return searching()
 
+    def next_ranks(size: int) -> list[int]:
+        """Up to `size` proposals to solve next, passing over (in the search for the intent)
+        those `misses` says will miss it."""
+        nonlocal following
+        ranks: list[int] = []
+        while len(ranks) < size and following < count:
+            rank, following = following, following + 1
+            why = None
+            if off_intent is not None and not s.validate_all and misses is not None:
+                why = misses(rank)
+            if why is None:
+                ranks.append(rank)
+            else:
+                passed[rank] = why
+        return ranks
+
     solved_at_off = 0
     while position < s.max_candidates and remaining() > 0:
-        first = len(candidates)
         size = min(count if sweeping() else s.solve_batch, searching())
-        solved = solve(list(range(first, min(first + size, count))))
+        ranks = next_ranks(size)
+        if not ranks:
+            continue
+        solved = solve(ranks)
         candidates.extend(solved)
         queue += [c for c in solved if c.solve.ok and c.quality >= s.min_quality]
         deferred += [c for c in solved if c.solve.ok and c.quality < s.min_quality]
@@ -146,4 +172,4 @@ def run_schedule(
         validate_queue()
     elif found is None and off_intent is not None:
         validate_queue()  # the intent-meeting candidates of the last solves
-    return Scheduled(candidates, found, fallback, off_intent)
+    return Scheduled(candidates, found, fallback, off_intent, passed)

@@ -75,6 +75,16 @@ class ScheduleSettings:
     # intent; searching every proposal (before the by-part proposals were added in turn),
     # 83/65/77% (docs/intent_log.md)
     intent_search: int | None = None
+    # ... and in that search, proposals that will miss the intent as drawn are passed over
+    # unsolved (planner.intent.proposal_misses: an anchor nearer a part the intent keeps clear
+    # than `miss_anchor_share` of the clearance it asks, Handover's 2 cm or Use's 1 cm, or a
+    # drawn wrist failing Liftup's wrist criteria). On the main table's learned test pairs
+    # (three seeds, 90dc607), of the samples solved in that search with an anchor within 5 mm
+    # of a part Handover keeps clear none met it (0 of 426; within 3 mm of Use's working parts
+    # 2 of 79), and of Liftup's samples drawn not facing it 16 of 835 (docs/learned_log.md,
+    # "Passing over proposals that will miss the intent")
+    pass_over_misses: bool = True
+    miss_anchor_share: float = 0.25
     # processes a batch of solves is shared over (planner.parallel: forked, results identical
     # to solving one by one). None: one per core this process may use, 1 in a pool worker
     # (eval.benchmark, batch jobs: their workers already share the cores).
@@ -87,6 +97,10 @@ class ScheduleSettings:
             raise PlanningError(
                 f"schedule.solve_processes must be 1 or more (or None: one per core), "
                 f"got {self.solve_processes}"
+            )
+        if not 0 <= self.miss_anchor_share <= 1:
+            raise PlanningError(
+                f"schedule.miss_anchor_share must be in [0, 1], got {self.miss_anchor_share}"
             )
         if self.intent_first < 0 or (self.intent_search is not None and self.intent_search < 0):
             raise PlanningError(

@@ -91,6 +91,7 @@ def _labelled_box(folder: Path, extents, name: str) -> tuple[Path, Path]:
     return path, labels
 
 
+@pytest.mark.slow  # three CLI processes, each loading the planner (10 s)
 def test_exit_codes_success_no_grasp_and_bad_input(tmp_path):
     """0: a grasp holds (and --out is written into a folder made for it); 1: the planner ran and
     nothing held; 2: bad input, reported without a traceback."""

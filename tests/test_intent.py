@@ -518,3 +518,42 @@ def test_a_use_part_inside_a_working_parts_clearance_cannot_be_met(objects):
     )
     assert "wall" in I.unmeetable(cup, meaning, changed(RULES, use=UseRule(working_clearance=0.02)))
     assert I.unmeetable(cup, meaning) is None  # 10 mm: within a touch's reach of 8 mm deep
+
+
+# ---- proposals that will miss the intent as drawn -----------------------------------------------
+def test_proposal_misses_anchors_beside_a_part_kept_clear_and_wrists_that_do_not_face(
+    hand_name, objects
+):
+    """The search for the intent passes over proposals whose anchor lies beside a part the
+    definition keeps clear (Handover's other parts, Use's working parts) and whose drawn wrist
+    fails Liftup's wrist criteria; anchors and wrists clear of both pass."""
+    hand, knife, mug = load_hand(hand_name), objects("knife"), objects("mug")
+    handover = intent_definition(knife, "Handover a knife by handle")
+    handle, blade = part_points(knife, "handle"), part_points(knife, "blade")
+    gaps = cKDTree(blade).query(handle)[0]
+    near, far = handle[np.argsort(gaps)[:4]], handle[np.argsort(gaps)[-4:]]
+    wrist = np.array([0, 0, 0.3, 1.0, 0, 0, 0])
+    why = I.proposal_misses(wrist, near, knife, hand, handover, knife, 0.25)
+    assert why is not None and "the blade" in why
+    assert I.proposal_misses(wrist, far, knife, hand, handover, knife, 0.25) is None
+    # no labels to measure the anchors on: nothing is said of them
+    assert I.proposal_misses(wrist, near, knife, hand, handover, None, 0.25) is None
+    use = intent_definition(knife, "Use a knife by handle")  # the blade kept clear
+    assert I.proposal_misses(wrist, near, knife, hand, use, knife, 0.25) is not None
+
+    liftup = intent_definition(mug, "Liftup a mug by body")
+    body = part_points(mug, "body")
+    top = [body[:, 0].mean(), body[:, 1].mean(), body[:, 2].max() + 0.01]
+    side = [body[:, 0].min() - 0.01, body[:, 1].mean(), 0.0]
+    anchors = body[:4]
+    assert (
+        I.proposal_misses(placed(hand, top, -Z, X)[0], anchors, mug, hand, liftup, mug, 0.25)
+        is None
+    )
+    why = I.proposal_misses(placed(hand, side, X, Z)[0], anchors, mug, hand, liftup, mug, 0.25)
+    assert why is not None and "palm_down" in why
+    # Hold asks nothing of the drawn wrist or of the anchors' distance to other parts
+    hold = intent_definition(mug, "Hold a mug by body")
+    assert (
+        I.proposal_misses(placed(hand, side, X, Z)[0], anchors, mug, hand, hold, mug, 0.25) is None
+    )

@@ -101,6 +101,7 @@ def _reference_meshes() -> list[Path]:
     return sorted((REFERENCE / "objects").glob("*/*.obj"))
 
 
+@pytest.mark.slow  # data-dependent: every reference scan loaded and sampled (6-7 s)
 def test_reference_meshes_load_fast():
     meshes = _reference_meshes()
     if not meshes:

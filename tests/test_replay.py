@@ -51,8 +51,11 @@ def _record(result, part: str) -> PairRecord:
 def test_replay_of_all_validated_records_is_the_plan(hand_name, tmp_path):
     # a small policy whose sweep after 2 failed validations is reached on this handle (here: by
     # every hand, which then solves all 8 proposals; no candidate waits for the gate)
+    # (passing over proposals that will miss the intent is not replayed: eval.replay)
     small = PlannerSettings(
-        schedule=ScheduleSettings(max_candidates=4, sweep_after=2, min_quality=0.0),
+        schedule=ScheduleSettings(
+            max_candidates=4, sweep_after=2, min_quality=0.0, pass_over_misses=False
+        ),
         proposals=ProposalSettings(max_proposals=8),
     )
     obj = make_object("mug", 3)
@@ -175,14 +178,16 @@ def test_replay_of_a_learned_benchmark_record_is_the_plan(tmp_path):
         ) + overrides
         return benchmark.run_task(benchmark.Task(*pair, candidates, 4, "full", False, small))
 
-    planned = task((), 3)
+    planned = task((("schedule.pass_over_misses", False),), 3)  # not replayed: eval.replay
     everything = task((("schedule.validate_all", True),), 32)
     path = tmp_path / "records.jsonl"
     path.write_text(json.dumps(asdict(everything)) + "\n")
     (record,), labelled = load_benchmark_records(path, None)
     assert not labelled
     settings = PlannerSettings(
-        schedule=ScheduleSettings(max_candidates=3, sweep_after=2, min_quality=0.0)
+        schedule=ScheduleSettings(
+            max_candidates=3, sweep_after=2, min_quality=0.0, pass_over_misses=False
+        )
     )
     replayed = replay_pair(record, settings, labelled, ordered=True)
     assert replayed.candidates == planned.candidates

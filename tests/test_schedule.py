@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from planner.grasp_program import SolveResult
+from planner.intent import IntentCheck
 from planner.results import CandidateResult, Proposal
 from planner.schedule import run_schedule
 from planner.settings import PlannerSettings, ScheduleSettings
@@ -56,3 +57,48 @@ def test_later_proposals_are_made_once_and_solved_after_the_first():
 def test_where_none_are_made_the_search_ends_with_the_first():
     batches, calls = _run(-1, 8, 0, solve_batch=4, sweep_after=None, max_candidates=12)
     assert batches == [[0, 1, 2, 3], [4, 5, 6, 7]] and calls == 1
+
+
+def _search(misses, count: int = 12, **schedule):
+    """Proposal 0 holds without meeting the intent, proposal 9 holds and meets it; the solve
+    batches asked for and what was scheduled."""
+    batches: list[list[int]] = []
+
+    def solve(ranks: list[int]) -> list[CandidateResult]:
+        batches.append(ranks)
+        cands = [_candidate(r) for r in ranks]
+        for c in cands:
+            c.intent = IntentCheck("Handover", c.rank == 9, (), "")
+        return cands
+
+    def validate(cand: CandidateResult) -> None:
+        cand.success, cand.part = cand.rank in (0, 9), "handle"
+
+    settings = PlannerSettings(schedule=ScheduleSettings(solve_batch=4, **schedule))
+    scheduled = run_schedule(count, solve, validate, "handle", settings, None, misses)
+    return batches, scheduled
+
+
+def test_the_search_for_the_intent_passes_over_proposals_that_will_miss_it():
+    def misses(rank: int) -> str | None:
+        return "an anchor lies 2 mm from the blade" if rank in (4, 5, 6, 7, 8) else None
+
+    batches, scheduled = _search(misses)
+    # the first batch is solved whole (nothing has held yet, so any grasp may be the one
+    # returned); after proposal 0 held off its intent, 4-8 are passed over unsolved
+    assert batches[0] == [0, 1, 2, 3] and batches[1] == [9, 10, 11]
+    assert scheduled.found.rank == 9 and scheduled.off_intent.rank == 0
+    assert sorted(scheduled.passed) == [4, 5, 6, 7, 8]
+    assert [c.rank for c in scheduled.candidates] == [0, 1, 2, 3, 9, 10, 11]
+
+
+def test_without_a_reason_to_pass_over_every_proposal_is_solved():
+    batches, scheduled = _search(None)
+    assert batches == [[0, 1, 2, 3], [4, 5, 6, 7], [8, 9, 10, 11]] and not scheduled.passed
+    assert scheduled.found.rank == 9
+
+
+def test_passing_over_every_remaining_proposal_ends_the_search():
+    batches, scheduled = _search(lambda rank: "the drawn wrist fails palm_down")
+    assert batches == [[0, 1, 2, 3]] and scheduled.found is None
+    assert scheduled.on_part.rank == 0 and sorted(scheduled.passed) == list(range(4, 12))
