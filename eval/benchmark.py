@@ -132,9 +132,10 @@ class Record:
     plan_time: float = 0.0
     stage_times: dict[str, float] = field(default_factory=dict)
     # every solved candidate (planner.results.CandidateResult.summary), with the proposal's
-    # anchors and anchor closure and, where validated and held, the part it touches on the
-    # labelled object ("touched") and whether it holds on the full object ("held_full"): what
-    # a validation order can be compared on afterwards (with schedule.validate_all=true)
+    # drawn wrist ("drawn_wrist"), anchors and anchor closure and, where validated and held,
+    # the part it touches on the labelled object ("touched") and whether it holds on the full
+    # object ("held_full"): what a validation order can be compared on afterwards (with
+    # schedule.validate_all=true)
     candidate_summaries: list[dict] = field(default_factory=list)
     error: str = ""
 
@@ -269,6 +270,7 @@ def run_task(task: Task) -> Record:
         summary["anchor_quality"] = cand.proposal.anchor_quality
         summary["shaped"] = cand.proposal.shaped
         summary["anchors"] = np.round(cand.proposal.anchors, 4).tolist()
+        summary["drawn_wrist"] = np.round(cand.proposal.wrist, 4).tolist()
         summary["held_full"], summary["touched"] = verdicts[cand.rank]
         rec.candidate_summaries.append(summary)
     return rec
