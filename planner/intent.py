@@ -596,10 +596,10 @@ def proposal_misses(
         kept = _kept_clear(of, meaning, rules)
         if kept is not None:
             trees, clearance, names = kept
-            gap = float(
-                min(tree.query(np.asarray(anchors, dtype=float))[0].min() for tree in trees)
-            )
-            if gap < anchor_share * clearance:
+            placed = np.asarray(anchors, dtype=float)
+            placed = placed[np.isfinite(placed).all(axis=1)]  # a pinch's free finger: NaN
+            gap = min((float(t.query(placed)[0].min()) for t in trees), default=np.inf)
+            if len(placed) and gap < anchor_share * clearance:
                 return f"an anchor lies {_mm(gap)} from {names} ({_mm(clearance)} asked)"
     from models.objects.intents import WRIST_CRITERIA
 

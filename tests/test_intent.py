@@ -536,6 +536,11 @@ def test_proposal_misses_anchors_beside_a_part_kept_clear_and_wrists_that_do_not
     why = I.proposal_misses(wrist, near, knife, hand, handover, knife, 0.25)
     assert why is not None and "the blade" in why
     assert I.proposal_misses(wrist, far, knife, hand, handover, knife, 0.25) is None
+    # a pinch leaves its last anchor finger free (NaN): only the placed anchors count
+    pinch = np.vstack([near[:3], np.full((1, 3), np.nan)])
+    assert I.proposal_misses(wrist, pinch, knife, hand, handover, knife, 0.25) is not None
+    pinch = np.vstack([far[:3], np.full((1, 3), np.nan)])
+    assert I.proposal_misses(wrist, pinch, knife, hand, handover, knife, 0.25) is None
     # no labels to measure the anchors on: nothing is said of them
     assert I.proposal_misses(wrist, near, knife, hand, handover, None, 0.25) is None
     use = intent_definition(knife, "Use a knife by handle")  # the blade kept clear
