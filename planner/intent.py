@@ -586,10 +586,11 @@ def proposal_misses(
     """Why a proposal, as drawn (before its solve), will not meet the definition, or None
     where it might: a fingertip placed on an anchor nearer a part the definition keeps clear
     than `anchor_share` of the clearance it asks (Handover's 2 cm, Use's 1 cm) is deep inside
-    it, and a wrist that fails a criterion the wrist decides (Liftup's palm down, above the centre of
-    mass) is rarely turned by a solve that starts there. `labels`: the labelled object the
-    definition is measured on (the object itself or the interaction model's labels; None:
-    no anchor check). For the search after a grasp held off its intent (planner.schedule):
+    it, and a wrist that fails a criterion the wrist and the palm rigid with it decide (Liftup's
+    palm down, above the centre of mass; Handover's palm away from the free end) is rarely turned
+    by a solve that starts there. `labels`: the labelled object the definition is measured on
+    (the object itself or the interaction model's labels; None: nothing that needs labels is
+    checked). For the search after a grasp held off its intent (planner.schedule):
     a guide to what is worth solving, not a verdict."""
     if labels is not None and labels.labelled:
         of = _object_facts(labels)
@@ -601,13 +602,18 @@ def proposal_misses(
             gap = min((float(t.query(placed)[0].min()) for t in trees), default=np.inf)
             if len(placed) and gap < anchor_share * clearance:
                 return f"an anchor lies {_mm(gap)} from {names} ({_mm(clearance)} asked)"
-    from models.objects.intents import WRIST_CRITERIA
+    from models.objects.intents import PALM_CRITERIA, label_free
 
-    if WRIST_CRITERIA & set(meaning.criteria):
+    drawn = PALM_CRITERIA & set(meaning.criteria)
+    if drawn and (label_free(meaning.intent) or (labels is not None and labels.labelled)):
+        if labels is None or labels is obj:
+            of = _object_facts(obj)
+        else:  # the guessed labels, about the object's own mass centre
+            of = _region_facts(obj, labels)
         hf = _hand_facts(hand)
         cfg = _configure(hand, hf, np.asarray(wrist, dtype=float), hand.open_pose)
-        check = _evaluate(meaning, _object_facts(obj), hf, cfg, rules)
-        failed = [c.name for c in check.criteria if c.name in WRIST_CRITERIA and not c.passed]
+        check = _evaluate(meaning, of, hf, cfg, rules)
+        failed = [c.name for c in check.criteria if c.name in drawn and not c.passed]
         if failed:
             return f"the drawn wrist fails {', '.join(failed)}"
     return None

@@ -532,7 +532,8 @@ def test_proposal_misses_anchors_beside_a_part_kept_clear_and_wrists_that_do_not
     handle, blade = part_points(knife, "handle"), part_points(knife, "blade")
     gaps = cKDTree(blade).query(handle)[0]
     near, far = handle[np.argsort(gaps)[:4]], handle[np.argsort(gaps)[-4:]]
-    wrist = np.array([0, 0, 0.3, 1.0, 0, 0, 0])
+    # the palm above the handle's far end: away from the blade, the receiver's
+    wrist, _ = placed(hand, far.mean(axis=0) + [0, 0, 0.03], -Z, Y)
     why = I.proposal_misses(wrist, near, knife, hand, handover, knife, 0.25)
     assert why is not None and "the blade" in why
     assert I.proposal_misses(wrist, far, knife, hand, handover, knife, 0.25) is None
@@ -557,6 +558,23 @@ def test_proposal_misses_anchors_beside_a_part_kept_clear_and_wrists_that_do_not
     )
     why = I.proposal_misses(placed(hand, side, X, Z)[0], anchors, mug, hand, liftup, mug, 0.25)
     assert why is not None and "palm_down" in why
+    # Handover: a palm beyond the held part's centre toward the free end (the mug's body
+    # handed over, its handle on +x the receiver's) is decided by the drawn wrist
+    handover = intent_definition(mug, "Handover a mug by body")
+    clear = body[np.argsort(body[:, 0])[:4]]  # anchors on the body's -x side, far from the handle
+    away = [body[:, 0].min() - 0.005, body[:, 1].mean(), 0.0]
+    assert (
+        I.proposal_misses(placed(hand, away, X, Z)[0], clear, mug, hand, handover, mug, 0.25)
+        is None
+    )
+    toward = [body[:, 0].max() + 0.03, body[:, 1].mean() + 0.05, body[:, 2].max() + 0.02]
+    why = I.proposal_misses(placed(hand, toward, -X, Z)[0], clear, mug, hand, handover, mug, 0.25)
+    assert why is not None and "away_from_free_end" in why
+    # ... which needs the labels
+    assert (
+        I.proposal_misses(placed(hand, toward, -X, Z)[0], clear, mug, hand, handover, None, 0.25)
+        is None
+    )
     # Hold asks nothing of the drawn wrist or of the anchors' distance to other parts
     hold = intent_definition(mug, "Hold a mug by body")
     assert (

@@ -122,6 +122,11 @@ LABEL_FREE_CRITERIA: frozenset[str] = frozenset(
 # before it is solved, since the grasp program keeps the drawn wrist rotation.
 WRIST_CRITERIA: frozenset[str] = frozenset({"wrist_above_com", "palm_down"})
 
+# ... and with the part labels, Handover's palm on the held part's side away from the free end
+# (the palm is rigid with the wrist): what a proposal's drawn wrist already decides
+# (planner.intent.proposal_misses)
+PALM_CRITERIA: frozenset[str] = WRIST_CRITERIA | {"away_from_free_end"}
+
 
 # Criteria measured on a part's own points alone (how wide it is, how near the palm is to it):
 # on a cloud without labels the region the learned samples point at stands in for the part
