@@ -329,3 +329,28 @@ def test_an_intent_the_part_cannot_meet_stops_at_the_first_hold(monkeypatch):
     assert len(result.candidates) == 4  # one batch
     searched = planner.plan(make_object("mug", 0), "Handover a mug by body")
     assert searched.unmeetable is None and len(searched.candidates) > 4
+
+
+@pytest.mark.parametrize("text", ["Liftup a mug by handle", "Handover a mug by body"])
+def test_the_search_for_the_intent_passes_over_proposals_that_will_miss_it(monkeypatch, mug, text):
+    """Once a grasp has held without meeting the intent, proposals whose drawn wrist fails
+    what it decides (Liftup's palm down; Handover's palm away from the free end), or whose
+    anchors lie beside a part kept clear, are passed over unsolved, each with its reason; the
+    rest are solved (planner.intent.proposal_misses, with the real proposals)."""
+    _fake(monkeypatch, intent_ok=lambda r: False, holds=lambda r: r == 0)
+    hand = "leap"  # its pinches leave a finger's anchor NaN
+    result = FunctionalPlanner(hand, PlannerSettings()).plan(mug, text)
+    assert result.success and result.best.rank == 0 and result.intent_ok is False
+    assert result.passed, "no proposal was passed over"
+    assert all(
+        why.startswith(("the drawn wrist fails", "an anchor lies"))
+        for why in result.passed.values()
+    )
+    solved = {c.rank for c in result.candidates}
+    assert not solved & set(result.passed)
+    assert solved | set(result.passed) == set(range(len(solved) + len(result.passed)))
+    # not passed over: with the setting off every proposal is solved
+    off = PlannerSettings(schedule=ScheduleSettings(pass_over_misses=False))
+    everything = FunctionalPlanner(hand, off).plan(mug, text)
+    assert not everything.passed
+    assert len(everything.candidates) == len(solved) + len(result.passed)
