@@ -78,11 +78,14 @@ class ScheduleSettings:
     # ... and in that search, proposals that will miss the intent as drawn are passed over
     # unsolved (planner.intent.proposal_misses: an anchor nearer a part the intent keeps clear
     # than `miss_anchor_share` of the clearance it asks, Handover's 2 cm or Use's 1 cm, or a
-    # drawn wrist failing Liftup's wrist criteria). On the main table's learned test pairs
-    # (three seeds, 90dc607), of the samples solved in that search with an anchor within 5 mm
-    # of a part Handover keeps clear none met it (0 of 426; within 3 mm of Use's working parts
-    # 2 of 79), and of Liftup's samples drawn not facing it 16 of 835 (docs/learned_log.md,
-    # "Passing over proposals that will miss the intent")
+    # drawn wrist failing what it decides: Liftup's palm down and wrist above the centre of
+    # mass, Handover's palm away from the free end). On the main table's learned test pairs
+    # (three seeds, 90dc607 and 5ae4bfd), of the candidates solved in that search with an
+    # anchor within 5 mm of a part Handover keeps clear none met it (0 of 426; within 3 mm of
+    # Use's working parts 2 of 79), of those drawn with the palm on Handover's free-end side
+    # none (0 of 230), and of Liftup's samples drawn not facing it 16 of 835; every plan
+    # returned the same with it (docs/learned_log.md, "Passing over proposals that will miss
+    # the intent")
     pass_over_misses: bool = True
     miss_anchor_share: float = 0.25
     # processes a batch of solves is shared over (planner.parallel: forked, results identical
