@@ -417,12 +417,20 @@ class FunctionalPlanner:
         measured_on = intent_labels if intent_labels is not None else obj
         if check_intent and intent_region is None and settings.schedule.pass_over_misses:
             meaning = intent_definition(measured_on, instruction)
-            share = settings.schedule.miss_anchor_share
+            sched = settings.schedule
 
             def misses(rank: int) -> str | None:
                 p = proposals[rank]
                 return proposal_misses(
-                    p.wrist, p.anchors, obj, self.hand, meaning, measured_on, share
+                    p.wrist,
+                    p.anchors,
+                    obj,
+                    self.hand,
+                    meaning,
+                    measured_on,
+                    sched.miss_anchor_share,
+                    sched.miss_tilt_margin_deg,
+                    sched.miss_height_margin,
                 )
 
         wanted = REGION_PART if voter is not None else part

@@ -581,6 +581,8 @@ def proposal_misses(
     meaning: Definition,
     labels: ObjectModel | None,
     anchor_share: float,
+    tilt_margin_deg: float = 0.0,
+    height_margin: float = 0.0,
     rules: Rules = RULES,
 ) -> str | None:
     """Why a proposal, as drawn (before its solve), will not meet the definition, or None
@@ -588,7 +590,9 @@ def proposal_misses(
     than `anchor_share` of the clearance it asks (Handover's 2 cm, Use's 1 cm) is deep inside
     it, and a wrist that fails a criterion the wrist and the palm rigid with it decide (Liftup's
     palm down, above the centre of mass; Handover's palm away from the free end) is rarely turned
-    by a solve that starts there. `labels`: the labelled object the definition is measured on
+    by a solve that starts there, by more than its margin (`tilt_margin_deg` beyond Liftup's
+    palm tilt, `height_margin` below its wrist height: drawn near them, a solve sometimes
+    turns them). `labels`: the labelled object the definition is measured on
     (the object itself or the interaction model's labels; None: nothing that needs labels is
     checked). For the search after a grasp held off its intent (planner.schedule):
     a guide to what is worth solving, not a verdict."""
@@ -612,7 +616,16 @@ def proposal_misses(
             of = _region_facts(obj, labels)
         hf = _hand_facts(hand)
         cfg = _configure(hand, hf, np.asarray(wrist, dtype=float), hand.open_pose)
-        check = _evaluate(meaning, of, hf, cfg, rules)
+        lift = rules.liftup
+        lenient = replace(
+            rules,
+            liftup=replace(
+                lift,
+                max_palm_tilt_deg=lift.max_palm_tilt_deg + tilt_margin_deg,
+                wrist_above_com=lift.wrist_above_com - height_margin,
+            ),
+        )
+        check = _evaluate(meaning, of, hf, cfg, lenient)
         failed = [c.name for c in check.criteria if c.name in drawn and not c.passed]
         if failed:
             return f"the drawn wrist fails {', '.join(failed)}"

@@ -558,6 +558,12 @@ def test_proposal_misses_anchors_beside_a_part_kept_clear_and_wrists_that_do_not
     )
     why = I.proposal_misses(placed(hand, side, X, Z)[0], anchors, mug, hand, liftup, mug, 0.25)
     assert why is not None and "palm_down" in why
+    # drawn 45 degrees from down: passed over with no margin, solved within a 30-degree one
+    tilted = np.array([np.sin(np.radians(45)), 0.0, -np.cos(np.radians(45))])
+    wrist45 = placed(hand, top, tilted, np.cross(tilted, Y))[0]
+    assert I.proposal_misses(wrist45, anchors, mug, hand, liftup, mug, 0.25) is not None
+    assert I.proposal_misses(wrist45, anchors, mug, hand, liftup, mug, 0.25, 30.0) is None
+    assert I.proposal_misses(wrist45, anchors, mug, hand, liftup, mug, 0.25, 10.0) is not None
     # Handover: a palm beyond the held part's centre toward the free end (the mug's body
     # handed over, its handle on +x the receiver's) is decided by the drawn wrist
     handover = intent_definition(mug, "Handover a mug by body")
