@@ -161,6 +161,7 @@ def test_a_squeeze_retry_holds_where_the_deeper_squeeze_held():
         with_retry([base], [replace(deeper, instruction="Hold a mug by body")])
 
 
+@pytest.mark.slow  # two learned benchmark plans, one with every candidate validated (7 s)
 def test_replay_of_a_learned_benchmark_record_is_the_plan(tmp_path):
     """An eval.benchmark record of the learned pipeline with every candidate validated, replayed
     with the plan's own settings, gives the plan eval.benchmark recorded with them: the
