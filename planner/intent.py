@@ -614,8 +614,6 @@ def proposal_misses(
             of = _object_facts(obj)
         else:  # the guessed labels, about the object's own mass centre
             of = _region_facts(obj, labels)
-        hf = _hand_facts(hand)
-        cfg = _configure(hand, hf, np.asarray(wrist, dtype=float), hand.open_pose)
         lift = rules.liftup
         lenient = replace(
             rules,
@@ -625,11 +623,26 @@ def proposal_misses(
                 wrist_above_com=lift.wrist_above_com - height_margin,
             ),
         )
-        check = _evaluate(meaning, of, hf, cfg, lenient)
-        failed = [c.name for c in check.criteria if c.name in drawn and not c.passed]
+        failed = _fails_as_drawn(wrist, hand, meaning, of, drawn, lenient)
         if failed:
             return f"the drawn wrist fails {', '.join(failed)}"
     return None
+
+
+def _fails_as_drawn(
+    wrist: np.ndarray,
+    hand: HandModel,
+    meaning: Definition,
+    of: _ObjectFacts,
+    names: Iterable[str],
+    rules: Rules,
+) -> list[str]:
+    """Which of the criteria `names` the open hand at this wrist pose fails: those the wrist
+    decides are known before the solve (`faces_intent`, `proposal_misses`)."""
+    hf = _hand_facts(hand)
+    cfg = _configure(hand, hf, np.asarray(wrist, dtype=float), hand.open_pose)
+    check = _evaluate(meaning, of, hf, cfg, rules)
+    return [c.name for c in check.criteria if c.name in names and not c.passed]
 
 
 def check_configuration(
@@ -668,8 +681,8 @@ def faces_intent(
     samples before they are solved."""
     from models.objects.intents import WRIST_CRITERIA
 
-    check = check_configuration(wrist, hand.open_pose, obj, hand, instruction)
-    return all(c.passed for c in check.criteria if c.name in WRIST_CRITERIA)
+    meaning = intent_definition(obj, instruction)
+    return not _fails_as_drawn(wrist, hand, meaning, _object_facts(obj), WRIST_CRITERIA, RULES)
 
 
 def _evaluate(
