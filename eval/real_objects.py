@@ -21,7 +21,8 @@ MuJoCo then validates the returned grasp against pieces made from the mesh's own
 planner's own). These meshes carry no part labels: a grasp counts when it holds, wherever it
 holds; Liftup's definition needs no labels and is checked where the sentence is read as Liftup
 ("pick up the can"). Records go to OUT/records.jsonl as they finish (an interrupted run
-resumes); OUT/summary.json and OUT/table.md at the end.
+resumes); OUT/summary.json and OUT/table.md at the end; with `--pages`, a 3-D page of each
+returned grasp on its mesh in OUT/pages (drograsp view's pages).
 """
 
 from __future__ import annotations
@@ -91,6 +92,7 @@ class Task:
     hand: str
     view: str
     sample_seed: int = 0
+    pages: str | None = None  # a folder for a 3-D page of each returned grasp (None: none)
 
     @property
     def key(self) -> tuple:
@@ -196,7 +198,21 @@ def run_task(task: Task) -> Record:
                 wrist, np.asarray(grasp.grasp), obj, planner.hand, result.instruction
             )
             rec.intent_ok, rec.intent_reason = bool(check.ok), check.reason or ""
+    if task.pages and result.grasp is not None:
+        page(task, rec, result.grasp, obj, planner.hand)
     return rec
+
+
+def page(task: Task, rec: Record, grasp, obj: ObjectModel, hand) -> Path:
+    """The returned grasp on the mesh as a 3-D page (planner.viewer.write_html), captioned
+    with the sentence, how it was read, the hand and the verdict on the mesh."""
+    from planner.viewer import write_html
+
+    slug = "_".join(task.text.lower().split())
+    name = f"{rec.mesh}_{task.view}_{task.hand}_{slug}_s{task.sample_seed}.html"
+    verdict = "holds on the mesh" if rec.held else f"does not hold on the mesh ({rec.status})"
+    text = f'{rec.mesh}: "{task.text}" (read as {rec.understood}), {task.hand}: {verdict}'
+    return write_html(grasp, obj, hand, Path(task.pages) / name, text)
 
 
 def summarise(records: list[Record]) -> list[dict]:
@@ -271,6 +287,11 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--seeds", type=int, nargs="+", default=[0], help="sample seeds (learned.seed)")
     p.add_argument("--workers", type=int, default=1)
     p.add_argument("--out", default="runs/real_objects", help="records, summary, table")
+    p.add_argument(
+        "--pages",
+        action="store_true",
+        help="also write a 3-D page of each returned grasp on its mesh to OUT/pages",
+    )
     args = p.parse_args(argv)
     folder = Path(args.objects)
     if not folder.is_dir():
@@ -284,14 +305,15 @@ def main(argv: list[str] | None = None) -> int:
     hands = args.hands or available_hands()
     for h in hands:
         load_hand(h)  # an unknown hand fails here, before any work
+    out = Path(args.out)
+    pages = str(out / "pages") if args.pages else None
     todo_all = [
-        Task(str(path), cat, text, hand, args.view, seed)
+        Task(str(path), cat, text, hand, args.view, seed, pages)
         for path, cat in found.items()
         for text in sentences(cat)
         for hand in hands
         for seed in args.seeds
     ]
-    out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     records_path = out / "records.jsonl"
     done = {r.key: r for r in _read(records_path)}

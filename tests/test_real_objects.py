@@ -30,7 +30,8 @@ def test_every_category_has_free_sentences_and_others_get_generic_ones():
 def test_a_mesh_is_planned_and_judged_on_its_own_pieces(tmp_path, hand_name):
     path = tmp_path / "mug.obj"
     make_object("mug", 3).mesh.export(path)
-    rec = run_task(Task(str(path), "mug", "pick up the mug", hand_name, "mesh"))
+    pages = tmp_path / "pages"
+    rec = run_task(Task(str(path), "mug", "pick up the mug", hand_name, "mesh", 0, str(pages)))
     assert rec.error == ""
     assert rec.understood.startswith("Liftup")
     # on the mesh view the planner validated on the same pieces: its verdict is the mesh's
@@ -38,3 +39,6 @@ def test_a_mesh_is_planned_and_judged_on_its_own_pieces(tmp_path, hand_name):
     assert rec.status == ("holds" if rec.planned else "none")
     # Liftup needs no labels: checked wherever a grasp held
     assert (rec.intent_ok is not None) == rec.held
+    # a page of the returned grasp on the mesh, where one was returned
+    written = list(pages.glob("mug_mesh_*_pick_up_the_mug_s0.html"))
+    assert len(written) == (1 if rec.status != "none" else 0)
