@@ -238,7 +238,8 @@ def summarise(records: list[Record]) -> list[dict]:
                 "median_s": statistics.median([r.plan_time for r in rs if not r.error] or [0.0]),
                 "errors": sum(bool(r.error) for r in rs),
                 "held_by_mesh": {
-                    m: sum(r.held for r in rs if r.mesh == m) for m in sorted({r.mesh for r in rs})
+                    m: [sum(r.held for r in rs if r.mesh == m), sum(r.mesh == m for r in rs)]
+                    for m in sorted({r.mesh for r in rs})
                 },
             }
         )
@@ -261,9 +262,10 @@ def table(rows: list[dict]) -> str:
             f"{r['errors']} |"
         )
     per_mesh = "; ".join(
-        f"{r['hand']}: " + ", ".join(f"{m} {n}" for m, n in r["held_by_mesh"].items()) for r in rows
+        f"{r['hand']}: " + ", ".join(f"{m} {h}/{n}" for m, (h, n) in r["held_by_mesh"].items())
+        for r in rows
     )
-    return "\n".join(lines) + f"\n\nHeld per mesh (plans that held): {per_mesh}\n"
+    return "\n".join(lines) + f"\n\nHeld on the mesh, per mesh (of its plans): {per_mesh}\n"
 
 
 def _read(path: Path) -> list[Record]:
