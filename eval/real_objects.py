@@ -49,6 +49,7 @@ from models.objects.views import sampled_cloud_object, single_view_object
 from planner.batch.executors import one_thread
 from planner.functional import FunctionalPlanner
 from planner.intent import check_configuration
+from planner.labels import grasp_part
 from planner.settings import LearnedSettings, PlannerSettings
 
 REFERENCE = Path(__file__).resolve().parents[1].parent / "shared" / "reference" / "objects"
@@ -59,6 +60,16 @@ VIEWS = {
     "mesh": "the meshes, pieces from their surface samples",
 }
 MESH_SUFFIXES = (".obj", ".ply", ".stl", ".glb")
+# categories whose handle is found on the mesh (`handle_labels`), so that a sentence naming the
+# handle is scored on the part it touches: the points farther than HANDLE_MARGIN outside the
+# body's outer wall at their height (its axis: vertical through the centroid of the points
+# within HANDLE_BASE of the bottom, where no handle reaches; the wall: that quantile of the
+# distances from the axis in slices of HANDLE_SLICE, the handle being the smaller share)
+HANDLED = ("mug",)  # a pitcher's body is no solid of revolution: its spout reads as handle
+HANDLE_MARGIN = 0.006  # m
+HANDLE_SLICE = 0.01  # m
+HANDLE_BASE = 0.003  # m
+HANDLE_WALL_QUANTILE = 0.75
 
 # two free-form sentences per category of the reference meshes; none is a table instruction
 SENTENCES: dict[str, tuple[str, ...]] = {
@@ -108,6 +119,9 @@ class Record:
     view: str
     sample_seed: int
     understood: str | None = None  # the table instruction the sentence was read as
+    # where the sentence names a handle found on the mesh (HANDLED): the part the returned
+    # grasp's fingertips touch, "body" or "handle" (planner.labels.grasp_part); else None
+    part_touched: str | None = None
     status: str = ""  # PlanResult.status: "holds", "uncertain" or "none"
     planned: bool = False  # the planner says its grasp holds (on what it was given)
     held: bool = False  # the returned grasp holds on the mesh's own pieces
@@ -148,6 +162,29 @@ def mesh_object(path: str) -> ObjectModel:
             warnings.simplefilter("ignore", OpenMeshWarning)
             _MESHES[path] = replace(load_object(path), pieces="surface")
     return _MESHES[path]
+
+
+def handle_labels(obj: ObjectModel) -> ObjectModel | None:
+    """The mesh's surface points as a cloud labelled "body" and "handle" (see HANDLED), or
+    None where no point lies outside the wall."""
+    pts = obj.points
+    base = pts[:, 2] < pts[:, 2].min() + HANDLE_BASE
+    centre = pts[base, :2].mean(axis=0)
+    radius = np.linalg.norm(pts[:, :2] - centre, axis=1)
+    level = np.floor((pts[:, 2] - pts[:, 2].min()) / HANDLE_SLICE).astype(int)
+    wall = np.zeros(len(pts))
+    for k in np.unique(level):
+        wall[level == k] = np.quantile(radius[level == k], HANDLE_WALL_QUANTILE)
+    handle = radius > wall + HANDLE_MARGIN
+    if not handle.any():
+        return None
+    return ObjectModel(
+        name=obj.name,
+        cloud=pts,
+        cloud_normals=obj.normals,
+        cloud_labels=handle.astype(np.int64),
+        part_names=("body", "handle"),
+    )
 
 
 def given(obj: ObjectModel, view: str, seed: int) -> ObjectModel:
@@ -198,6 +235,12 @@ def run_task(task: Task) -> Record:
                 wrist, np.asarray(grasp.grasp), obj, planner.hand, result.instruction
             )
             rec.intent_ok, rec.intent_reason = bool(check.ok), check.reason or ""
+    if rec.held and task.category in HANDLED and "handle" in task.text:
+        labelled = handle_labels(obj)
+        if labelled is not None:
+            grasp = result.grasp
+            wrist = np.concatenate([grasp.wrist_pos, grasp.wrist_quat])
+            rec.part_touched = grasp_part(planner.hand, wrist, np.asarray(grasp.grasp), labelled)
     if task.pages and result.grasp is not None:
         page(task, rec, result.grasp, obj, planner.hand)
     return rec
@@ -217,12 +260,14 @@ def page(task: Task, rec: Record, grasp, obj: ObjectModel, hand) -> Path:
 
 def summarise(records: list[Record]) -> list[dict]:
     """Per hand: plans, held on the mesh, the planner's own verdict against the mesh's, Liftup
-    met, uncertain plans, median time, errors."""
+    met, the handle touched where a sentence names a mug's handle, uncertain plans, median
+    time, errors."""
     rows = []
     for hand in sorted({r.hand for r in records}):
         rs = [r for r in records if r.hand == hand]
         said = [r for r in rs if r.planned]
         lifted = [r for r in rs if r.intent_ok is not None]
+        scored = [r for r in rs if r.part_touched is not None]
         rows.append(
             {
                 "hand": hand,
@@ -235,6 +280,10 @@ def summarise(records: list[Record]) -> list[dict]:
                 if not lifted
                 else 100.0 * sum(bool(r.intent_ok) for r in lifted) / len(lifted),
                 "liftup_checked": len(lifted),
+                "on_handle": None
+                if not scored
+                else 100.0 * sum(r.part_touched == "handle" for r in scored) / len(scored),
+                "handle_scored": len(scored),
                 "median_s": statistics.median([r.plan_time for r in rs if not r.error] or [0.0]),
                 "errors": sum(bool(r.error) for r in rs),
                 "held_by_mesh": {
@@ -249,16 +298,18 @@ def summarise(records: list[Record]) -> list[dict]:
 def table(rows: list[dict]) -> str:
     lines = [
         "| hand | plans | held on the mesh | said to hold | of those, held on the mesh | "
-        "uncertain | Liftup met (of held) | median s / plan | errors |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "uncertain | Liftup met (of held) | on the handle (of held) | median s / plan | errors |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         lift = (
             "-" if r["liftup_met"] is None else f"{r['liftup_met']:.0f}% of {r['liftup_checked']}"
         )
+        handle = "-" if r["on_handle"] is None else f"{r['on_handle']:.0f}% of {r['handle_scored']}"
         lines.append(
             f"| {r['hand']} | {r['plans']} | {r['held']:.0f}% | {r['said_held']:.0f}% | "
-            f"{r['said_and_held']:.0f}% | {r['uncertain']} | {lift} | {r['median_s']:.1f} | "
+            f"{r['said_and_held']:.0f}% | {r['uncertain']} | {lift} | {handle} | "
+            f"{r['median_s']:.1f} | "
             f"{r['errors']} |"
         )
     per_mesh = "; ".join(
@@ -285,6 +336,7 @@ def main(argv: list[str] | None = None) -> int:
         "file,category columns names their categories (default: ../shared/reference/objects)",
     )
     p.add_argument("--view", default="cloud", choices=VIEWS, help="what the pipeline is given")
+    p.add_argument("--categories", nargs="+", default=None, help="default: every mesh's")
     p.add_argument("--hands", nargs="+", default=None, help="default: every built-in hand")
     p.add_argument("--seeds", type=int, nargs="+", default=[0], help="sample seeds (learned.seed)")
     p.add_argument("--workers", type=int, default=1)
@@ -302,8 +354,13 @@ def main(argv: list[str] | None = None) -> int:
             "third-party reference data at ../shared/reference/objects)"
         )
     found = categories(folder)
+    if args.categories:
+        found = {p: c for p, c in found.items() if c in args.categories}
     if not found:
-        raise SystemExit(f"--objects: no mesh (obj, ply, stl, glb) under {folder}")
+        raise SystemExit(
+            f"--objects: no mesh (obj, ply, stl, glb) under {folder}"
+            + (f" of the categories {', '.join(args.categories)}" if args.categories else "")
+        )
     hands = args.hands or available_hands()
     for h in hands:
         load_hand(h)  # an unknown hand fails here, before any work
