@@ -124,7 +124,8 @@ class Record:
     part_touched: str | None = None
     status: str = ""  # PlanResult.status: "holds", "uncertain" or "none"
     planned: bool = False  # the planner says its grasp holds (on what it was given)
-    held: bool = False  # the returned grasp holds on the mesh's own pieces
+    # the returned grasp (holding or uncertain) holds on the mesh's own pieces
+    held: bool = False
     # Liftup read and checked without labels: the returned grasp meets it (None: not checked,
     # or no grasp)
     intent_ok: bool | None = None
@@ -259,23 +260,27 @@ def page(task: Task, rec: Record, grasp, obj: ObjectModel, hand) -> Path:
 
 
 def summarise(records: list[Record]) -> list[dict]:
-    """Per hand: plans, held on the mesh, the planner's own verdict against the mesh's, Liftup
-    met, the handle touched where a sentence names a mug's handle, uncertain plans, median
-    time, errors."""
+    """Per hand: plans, held on the mesh (a grasp the planner returned as holding, as
+    eval.benchmark counts: an uncertain one is counted apart, with how many of those held), the
+    planner's own verdict against the mesh's, Liftup met and the handle touched (of the held),
+    median time, errors."""
     rows = []
     for hand in sorted({r.hand for r in records}):
         rs = [r for r in records if r.hand == hand]
         said = [r for r in rs if r.planned]
-        lifted = [r for r in rs if r.intent_ok is not None]
-        scored = [r for r in rs if r.part_touched is not None]
+        held = [r for r in said if r.held]
+        unsure = [r for r in rs if r.status == "uncertain"]
+        lifted = [r for r in held if r.intent_ok is not None]
+        scored = [r for r in held if r.part_touched is not None]
         rows.append(
             {
                 "hand": hand,
                 "plans": len(rs),
-                "held": 100.0 * sum(r.held for r in rs) / len(rs),
+                "held": 100.0 * len(held) / len(rs),
                 "said_held": 100.0 * len(said) / len(rs),
-                "said_and_held": 100.0 * sum(r.held for r in said) / max(len(said), 1),
-                "uncertain": sum(r.status == "uncertain" for r in rs),
+                "said_and_held": 100.0 * len(held) / max(len(said), 1),
+                "uncertain": len(unsure),
+                "uncertain_held": sum(r.held for r in unsure),
                 "liftup_met": None
                 if not lifted
                 else 100.0 * sum(bool(r.intent_ok) for r in lifted) / len(lifted),
@@ -287,7 +292,7 @@ def summarise(records: list[Record]) -> list[dict]:
                 "median_s": statistics.median([r.plan_time for r in rs if not r.error] or [0.0]),
                 "errors": sum(bool(r.error) for r in rs),
                 "held_by_mesh": {
-                    m: [sum(r.held for r in rs if r.mesh == m), sum(r.mesh == m for r in rs)]
+                    m: [sum(r in held for r in rs if r.mesh == m), sum(r.mesh == m for r in rs)]
                     for m in sorted({r.mesh for r in rs})
                 },
             }
@@ -298,7 +303,8 @@ def summarise(records: list[Record]) -> list[dict]:
 def table(rows: list[dict]) -> str:
     lines = [
         "| hand | plans | held on the mesh | said to hold | of those, held on the mesh | "
-        "uncertain | Liftup met (of held) | on the handle (of held) | median s / plan | errors |",
+        "uncertain (held on the mesh) | Liftup met (of held) | on the handle (of held) | "
+        "median s / plan | errors |",
         "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
@@ -308,7 +314,8 @@ def table(rows: list[dict]) -> str:
         handle = "-" if r["on_handle"] is None else f"{r['on_handle']:.0f}% of {r['handle_scored']}"
         lines.append(
             f"| {r['hand']} | {r['plans']} | {r['held']:.0f}% | {r['said_held']:.0f}% | "
-            f"{r['said_and_held']:.0f}% | {r['uncertain']} | {lift} | {handle} | "
+            f"{r['said_and_held']:.0f}% | {r['uncertain']} ({r['uncertain_held']}) | {lift} | "
+            f"{handle} | "
             f"{r['median_s']:.1f} | "
             f"{r['errors']} |"
         )
