@@ -83,3 +83,18 @@ def test_a_reset_or_non_finite_simulation_is_never_held():
     assert pushed.directions and pushed.directions[-1].unstable
     huge = grasp.to_dict() | {"wrist_pos": [1e300, 0.0, 0.0]}
     assert not validate(Grasp.from_dict(huge), pieces, "allegro", "paper").success
+
+
+def test_the_scene_reserves_room_for_many_contacts(hand_name):
+    """A closing hand on a cloud's many pieces can make hundreds of contacts: MuJoCo's default
+    arena (sized from the model) aborted such a validation with "mj_stackAlloc: out of memory"
+    (LEAP on a single view of a YCB soup can: 422 contacts); the scene reserves ARENA_BYTES."""
+    from models.hands import load_hand
+    from planner.validation.hands import as_hand
+    from planner.validation.objects import as_collision_object
+    from planner.validation.protocol import get_protocol
+    from planner.validation.scene import ARENA_BYTES, get_scene
+
+    box = as_collision_object([trimesh.creation.box((0.05, 0.05, 0.05))])
+    scene = get_scene(as_hand(load_hand(hand_name)), box, get_protocol("paper"))
+    assert scene.model.narena >= ARENA_BYTES

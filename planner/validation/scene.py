@@ -59,6 +59,14 @@ class Scene:
     object_mass: float
 
 
+# MuJoCo's arena for contacts and constraints (`<size memory>`; its default is sized from the
+# model, 15 MB for LEAP with a can's pieces): a closing LEAP hand on the pieces of a
+# single-view cloud of a YCB soup can made 422 contacts and 1106 constraint rows and aborted
+# the validation with "mj_stackAlloc: out of memory" (eval.real_objects). Only what is
+# reserved changes: the simulation is the same.
+ARENA_BYTES = 256 * 2**20
+
+
 def _configure(spec: mujoco.MjSpec, protocol: Protocol) -> None:
     opt = spec.option
     opt.timestep = protocol.timestep
@@ -110,6 +118,7 @@ def build_scene(hand: HandAdapter, obj: CollisionObject, protocol: Protocol) -> 
         raise ObjectError(f"object {obj.name!r} has zero volume; cannot set its mass")
     _add_object(spec, obj, protocol.object_mass / volume)
     _configure(spec, protocol)
+    spec.memory = max(spec.memory, ARENA_BYTES)
     try:
         model = spec.compile()
     except ValueError as err:
