@@ -242,6 +242,7 @@ def _copy_blocks(dst: Path, names: list[str], old_format: bool = False) -> Path:
     return dst
 
 
+@pytest.mark.slow  # data-dependent: the whole shipped dataset read and counted (5-6 s)
 @needs_shipped
 def test_shipped_dataset_loads_and_matches_its_card():
     """The committed dataset: every row valid (held, on the instructed part, in its object's

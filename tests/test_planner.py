@@ -203,6 +203,7 @@ def test_cli_plan_refuses_an_unknown_setting_naming_the_valid_ones():
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 
 
+@pytest.mark.slow  # a headless browser renders the page (7-8 s); .ci/run installs Chromium
 @pytest.mark.skipif(CHROMIUM is None, reason="Chromium is not installed (apt-get install chromium)")
 def test_viewer_page_renders_in_headless_chromium(tmp_path):
     from PIL import Image
