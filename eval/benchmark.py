@@ -50,21 +50,18 @@ import argparse
 import json
 import statistics
 import time
-from concurrent.futures import ProcessPoolExecutor
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import torch
-from tqdm import tqdm
 
+from eval.runs import read_records, run_resumable
 from models.errors import DrograspError
 from models.hands import available_hands, load_hand
 from models.objects import ObjectModel, make_object, parse_instruction
 from models.objects.names import INTENTS
 from models.objects.views import random_turn, sampled_cloud_object, single_view_object, turned
-from planner.batch.executors import one_thread
 from planner.commands.validate import parse_overrides
 from planner.functional import FunctionalPlanner
 from planner.intent import check_configuration, intent_definition, unmeetable
@@ -487,12 +484,6 @@ def bars(rows: list[dict], path: Path, title: str) -> None:
     plt.close(fig)
 
 
-def _read(path: Path) -> list[Record]:
-    if not path.is_file():
-        return []
-    return [Record(**json.loads(line)) for line in path.read_text().splitlines() if line.strip()]
-
-
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m eval.benchmark", description=__doc__.split("\n")[0])
     p.add_argument("--split", default="test", choices=("train", "val", "test", "heldout"))
@@ -541,7 +532,11 @@ def main(argv: list[str] | None = None) -> int:
         missing = [f for f in args.join if not (Path(f) / "records.jsonl").is_file()]
         if missing:
             raise SystemExit(f"--join: no records.jsonl in {', '.join(missing)}")
-        joined = {r.key: r for folder in args.join for r in _read(Path(folder) / "records.jsonl")}
+        joined = {
+            r.key: r
+            for folder in args.join
+            for r in read_records(Path(folder) / "records.jsonl", Record)
+        }
         rows = summarise(list(joined.values()))
         print(
             table(rows, args.candidates)
@@ -556,7 +551,6 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     records_path = out / "records.jsonl"
-    done = {r.key: r for r in _read(records_path)}
     overrides = parse_overrides(args.set)
     try:  # an unknown key or a bad value fails here, before any work
         with_overrides(PlannerSettings(), overrides)
@@ -584,25 +578,7 @@ def main(argv: list[str] | None = None) -> int:
         tuple(args.seeds),
         args.intents,
     )
-    todo = [t for t in todo_all if t.key not in done]
-    print(f"{len(todo_all)} tasks, {len(todo_all) - len(todo)} done before", flush=True)
-    with records_path.open("a") as sink:
-
-        def keep(rec: Record) -> None:
-            done[rec.key] = rec
-            sink.write(json.dumps(asdict(rec)) + "\n")
-            sink.flush()
-
-        if args.workers > 1:
-            with ProcessPoolExecutor(args.workers, initializer=one_thread) as pool:
-                for rec in tqdm(pool.map(run_task, todo), total=len(todo), desc="benchmark"):
-                    keep(rec)
-        else:
-            torch.set_num_threads(1)
-            for task in tqdm(todo, desc="benchmark"):
-                keep(run_task(task))
-    wanted = {t.key for t in todo_all}
-    records = [r for k, r in done.items() if k in wanted]
+    records = run_resumable(todo_all, run_task, records_path, Record, args.workers, "benchmark")
     rows = summarise(records)
     text = table(rows, args.candidates)
     text += meetable_line(rows)

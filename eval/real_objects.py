@@ -33,20 +33,17 @@ import json
 import statistics
 import time
 import warnings
-from concurrent.futures import ProcessPoolExecutor
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
-import torch
-from tqdm import tqdm
 
+from eval.runs import run_resumable
 from models.hands import available_hands, load_hand
 from models.objects import ObjectModel, load_object
 from models.objects.intents import label_free
 from models.objects.model import OpenMeshWarning
 from models.objects.views import sampled_cloud_object, single_view_object
-from planner.batch.executors import one_thread
 from planner.functional import FunctionalPlanner
 from planner.intent import check_configuration
 from planner.labels import grasp_part
@@ -326,12 +323,6 @@ def table(rows: list[dict]) -> str:
     return "\n".join(lines) + f"\n\nHeld on the mesh, per mesh (of its plans): {per_mesh}\n"
 
 
-def _read(path: Path) -> list[Record]:
-    if not path.is_file():
-        return []
-    return [Record(**json.loads(line)) for line in path.read_text().splitlines() if line.strip()]
-
-
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(
         prog="python -m eval.real_objects", description=__doc__.split("\n")[0]
@@ -382,26 +373,8 @@ def main(argv: list[str] | None = None) -> int:
     ]
     out.mkdir(parents=True, exist_ok=True)
     records_path = out / "records.jsonl"
-    done = {r.key: r for r in _read(records_path)}
-    todo = [t for t in todo_all if t.key not in done]
-    print(f"{len(todo_all)} tasks, {len(todo_all) - len(todo)} done before", flush=True)
-    with records_path.open("a") as sink:
-
-        def keep(rec: Record) -> None:
-            done[rec.key] = rec
-            sink.write(json.dumps(asdict(rec)) + "\n")
-            sink.flush()
-
-        if args.workers > 1:
-            with ProcessPoolExecutor(args.workers, initializer=one_thread) as pool:
-                for rec in tqdm(pool.map(run_task, todo), total=len(todo), desc="real objects"):
-                    keep(rec)
-        else:
-            torch.set_num_threads(1)
-            for task in tqdm(todo, desc="real objects"):
-                keep(run_task(task))
-    wanted = {t.key for t in todo_all}
-    rows = summarise([r for k, r in done.items() if k in wanted])
+    records = run_resumable(todo_all, run_task, records_path, Record, args.workers, "real objects")
+    rows = summarise(records)
     title = (
         f"{len(found)} meshes under {folder}, {VIEWS[args.view]}, "
         f"sample seeds {', '.join(map(str, args.seeds))}"
