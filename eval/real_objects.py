@@ -22,7 +22,10 @@ planner's own). These meshes carry no part labels: a grasp counts when it holds,
 holds; Liftup's definition needs no labels and is checked where the sentence is read as Liftup
 ("pick up the can"). Records go to OUT/records.jsonl as they finish (an interrupted run
 resumes); OUT/summary.json and OUT/table.md at the end; with `--pages`, a 3-D page of each
-returned grasp on its mesh in OUT/pages (drograsp view's pages).
+returned grasp on its mesh in OUT/pages (drograsp view's pages). With `--verdicts`, every
+candidate the planner validated is validated on the mesh too, and a second table says how often
+a candidate that held (or not) on what the planner was given holds on the mesh, per completion
+of the view (swept, mirrored, as seen): how far to trust the planner's verdict.
 """
 
 from __future__ import annotations
@@ -41,6 +44,7 @@ import numpy as np
 from eval.runs import run_resumable
 from models.hands import available_hands, load_hand
 from models.objects import ObjectModel, load_object
+from models.objects.completion import find_completion, smooth
 from models.objects.intents import label_free
 from models.objects.model import OpenMeshWarning
 from models.objects.views import sampled_cloud_object, single_view_object
@@ -48,6 +52,7 @@ from planner.functional import FunctionalPlanner
 from planner.intent import check_configuration
 from planner.labels import grasp_part
 from planner.settings import LearnedSettings, PlannerSettings
+from planner.validation import validate
 
 REFERENCE = Path(__file__).resolve().parents[1].parent / "shared" / "reference" / "objects"
 CLOUD_POINTS = 4096  # as eval.benchmark's --view cloud and drograsp demo's clouds
@@ -101,10 +106,18 @@ class Task:
     view: str
     sample_seed: int = 0
     pages: str | None = None  # a folder for a 3-D page of each returned grasp (None: none)
+    verdicts: bool = False  # also validate every validated candidate on the mesh
 
     @property
     def key(self) -> tuple:
-        return (Path(self.path).stem, self.text, self.hand, self.view, self.sample_seed)
+        return (
+            Path(self.path).stem,
+            self.text,
+            self.hand,
+            self.view,
+            self.sample_seed,
+            self.verdicts,
+        )
 
 
 @dataclass
@@ -131,10 +144,22 @@ class Record:
     plan_time: float = 0.0
     stage_times: dict[str, float] = field(default_factory=dict)
     error: str = ""
+    # a single view: how the planner completed it (models.objects.completion.Completion.kind)
+    completion: str = ""
+    # with --verdicts: per validated candidate, [held on what the planner was given (after
+    # its cloud checks), held on the mesh]; None: not asked
+    verdicts: list[list[bool]] | None = None
 
     @property
     def key(self) -> tuple:
-        return (self.mesh, self.text, self.hand, self.view, self.sample_seed)
+        return (
+            self.mesh,
+            self.text,
+            self.hand,
+            self.view,
+            self.sample_seed,
+            self.verdicts is not None,
+        )
 
 
 def categories(folder: Path) -> dict[Path, str]:
@@ -217,13 +242,19 @@ def run_task(task: Task) -> Record:
     except Exception as err:  # noqa: BLE001 - a benchmark records failures and goes on
         rec.error = f"{type(err).__name__}: {err}"[:300]
         return rec
-    from planner.validation import validate
-
     rec.understood = result.instruction.text
     rec.status = result.status
     rec.planned = bool(result.success)
     rec.candidates = len(result.candidates)
     rec.stage_times = {k: round(v, 4) for k, v in result.stage_times().items()}
+    if seen.viewpoint is not None:
+        rec.completion = find_completion(smooth(seen.points), np.asarray(seen.viewpoint)).kind
+    if task.verdicts:
+        rec.verdicts = [
+            [bool(c.success), bool(validate(c.grasp, pieces, planner.hand, "paper").success)]
+            for c in result.candidates
+            if c.grasp is not None and c.validation is not None
+        ]
     if result.grasp is not None and result.status != "none":
         rec.held = bool(validate(result.grasp, pieces, planner.hand, "paper").success)
         if rec.held and label_free(result.instruction.intent):
@@ -323,6 +354,45 @@ def table(rows: list[dict]) -> str:
     return "\n".join(lines) + f"\n\nHeld on the mesh, per mesh (of its plans): {per_mesh}\n"
 
 
+def summarise_verdicts(records: list[Record]) -> list[dict]:
+    """How far the planner's verdicts on what it was given hold on the mesh, over every
+    validated candidate of the records with verdicts: per completion of the view ("" for
+    clouds and meshes) and in all. A grasp planned on a guess is judged on the guess."""
+    asked = [r for r in records if r.verdicts is not None]
+    rows = []
+    for kind in sorted({r.completion for r in asked}) + ["all"]:
+        pairs = [v for r in asked if kind in ("all", r.completion) for v in r.verdicts]
+        held = [mesh for view, mesh in pairs if view]
+        slipped = [mesh for view, mesh in pairs if not view]
+        rows.append(
+            {
+                "completion": kind or "none (a cloud or mesh)",
+                "plans": sum(kind in ("all", r.completion) for r in asked),
+                "candidates": len(pairs),
+                "held": len(held),
+                "held_on_mesh": sum(held),
+                "slipped": len(slipped),
+                "slipped_held_on_mesh": sum(slipped),
+            }
+        )
+    return rows
+
+
+def verdicts_table(rows: list[dict]) -> str:
+    lines = [
+        "| completion of the view | plans | candidates validated | held on the view | of those, "
+        "held on the mesh | not held on the view | of those, held on the mesh |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        share = 100.0 * r["held_on_mesh"] / max(r["held"], 1)
+        lines.append(
+            f"| {r['completion']} | {r['plans']} | {r['candidates']} | {r['held']} | "
+            f"{r['held_on_mesh']} ({share:.0f}%) | {r['slipped']} | {r['slipped_held_on_mesh']} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(
         prog="python -m eval.real_objects", description=__doc__.split("\n")[0]
@@ -343,6 +413,12 @@ def main(argv: list[str] | None = None) -> int:
         "--pages",
         action="store_true",
         help="also write a 3-D page of each returned grasp on its mesh to OUT/pages",
+    )
+    p.add_argument(
+        "--verdicts",
+        action="store_true",
+        help="also validate every validated candidate on the mesh: how far the planner's "
+        "verdicts on what it was given hold, per completion of the view",
     )
     args = p.parse_args(argv)
     folder = Path(args.objects)
@@ -365,7 +441,7 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(args.out)
     pages = str(out / "pages") if args.pages else None
     todo_all = [
-        Task(str(path), cat, text, hand, args.view, seed, pages)
+        Task(str(path), cat, text, hand, args.view, seed, pages, args.verdicts)
         for path, cat in found.items()
         for text in sentences(cat)
         for hand in hands
@@ -381,6 +457,12 @@ def main(argv: list[str] | None = None) -> int:
     )
     text = table(rows)
     summary = {"objects": str(folder), "view": args.view, "seeds": args.seeds, "rows": rows}
+    if args.verdicts:
+        summary["verdicts"] = summarise_verdicts(records)
+        text += (
+            "\nThe planner's verdicts against the mesh's, every validated candidate:\n\n"
+            + verdicts_table(summary["verdicts"])
+        )
     (out / "summary.json").write_text(json.dumps(summary, indent=2))
     (out / "table.md").write_text(f"{title}\n\n{text}")
     print(f"\n{title}\n\n{text}")

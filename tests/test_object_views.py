@@ -130,6 +130,17 @@ def test_a_mugs_handle_is_mirrored_through_the_plane_through_its_axis():
     assert np.percentile(cKDTree(mug.points).query(done.points)[0], 99) < 0.005
 
 
+def test_a_completion_says_what_it_added():
+    from models.objects.completion import Completion, Mirror, Revolution
+
+    mirror = Mirror(np.array([1.0, 0.0, 0.0]), 0.0, 0.01)
+    turn = Revolution(np.zeros(2), np.ones(3, dtype=bool), np.ones((3, 15), dtype=bool), 0.01)
+    assert Completion(None, None).kind == "as seen"
+    assert Completion(None, mirror).kind == "mirrored"
+    assert Completion(turn, None).kind == "swept"
+    assert Completion(turn, mirror, axial=True).kind == "swept+mirrored"
+
+
 def test_completion_leaves_meshes_and_clouds_without_a_camera_alone():
     mug = make_object("mug", 3)
     assert complete_view(mug) is mug

@@ -6,7 +6,15 @@ from __future__ import annotations
 import pytest
 import trimesh
 
-from eval.real_objects import Task, categories, handle_labels, run_task, sentences
+from eval.real_objects import (
+    Record,
+    Task,
+    categories,
+    handle_labels,
+    run_task,
+    sentences,
+    summarise_verdicts,
+)
 from models.objects import make_object
 
 
@@ -37,14 +45,44 @@ def test_a_mugs_handle_is_found_where_its_labels_put_it(seed):
     assert (found & truth).sum() >= 0.95 * found.sum()  # and hardly anything else
 
 
+def test_verdicts_are_summed_per_completion_of_the_view():
+    def rec(completion: str, verdicts: list[list[bool]] | None) -> Record:
+        r = Record("m", "mug", "pick up the mug", "allegro", "single", 0, completion=completion)
+        r.verdicts = verdicts
+        return r
+
+    records = [
+        rec("mirrored", [[True, True], [True, False], [False, False]]),
+        rec("mirrored", [[False, True]]),
+        rec("swept+mirrored", [[True, True]]),
+        rec("as seen", None),  # planned without --verdicts: not counted
+    ]
+    rows = {r["completion"]: r for r in summarise_verdicts(records)}
+    assert set(rows) == {"mirrored", "swept+mirrored", "all"}
+    assert rows["mirrored"] == {
+        "completion": "mirrored",
+        "plans": 2,
+        "candidates": 4,
+        "held": 2,
+        "held_on_mesh": 1,
+        "slipped": 2,
+        "slipped_held_on_mesh": 1,
+    }
+    assert rows["all"]["plans"] == 3 and rows["all"]["held_on_mesh"] == 2
+
+
 @pytest.mark.slow  # one learned plan per hand on a mesh (about 10 s each)
 def test_a_mesh_is_planned_and_judged_on_its_own_pieces(tmp_path, hand_name):
     path = tmp_path / "mug.obj"
     make_object("mug", 3).mesh.export(path)
     pages = tmp_path / "pages"
     text = "pick up the mug by its handle"
-    rec = run_task(Task(str(path), "mug", text, hand_name, "mesh", 0, str(pages)))
+    rec = run_task(Task(str(path), "mug", text, hand_name, "mesh", 0, str(pages), verdicts=True))
     assert rec.error == ""
+    # every validated candidate judged again on the mesh: on the mesh view, the same verdicts
+    assert rec.completion == "" and rec.verdicts
+    assert all(view == mesh for view, mesh in rec.verdicts)
+    assert any(view for view, _ in rec.verdicts) == rec.planned
     assert rec.understood.startswith("Liftup")
     # on the mesh view the planner validated on the same pieces: its verdict is the mesh's
     assert rec.held == rec.planned

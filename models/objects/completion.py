@@ -333,6 +333,13 @@ class Completion:
     mirror: Mirror | None
     axial: bool = False
 
+    @property
+    def kind(self) -> str:
+        """ "swept", "swept+mirrored", "mirrored" or "as seen" (nothing added)."""
+        parts = ["swept"] if self.revolution is not None else []
+        parts += ["mirrored"] if self.mirror is not None else []
+        return "+".join(parts) or "as seen"
+
 
 def axial_mirror(points: np.ndarray, centre: np.ndarray, image: _DepthImage) -> Mirror | None:
     """The vertical plane through the axis at `centre` (x, y) along which `points` lie (what a
