@@ -93,10 +93,18 @@ class FunctionalPlanner:
 
         The proposals come from the model-based proposer of this module or from the learned
         stages (planner.learned_proposer), as `settings.proposer` says; solving, the schedule
-        and validation are the same for both."""
-        text = instruction if isinstance(instruction, str) else instruction.text
+        and validation are the same for both. A single view is completed first
+        (`settings.complete_views`), and a grasp planned on it comes with a note of what its
+        verdict rests on (`view_note`)."""
         if self.settings.complete_views:
             obj = complete_view(obj)
+        result = self._plan(obj, instruction)
+        if obj.completed_by is not None and result.grasp is not None:
+            result.notes.append(view_note(obj.completed_by))
+        return result
+
+    def _plan(self, obj: ObjectModel, instruction: Instruction | str) -> PlanResult:
+        text = instruction if isinstance(instruction, str) else instruction.text
         chosen = self.proposer_for(obj, instruction)
         if chosen in ("learned", "direct"):
             return self._plan_learned(obj, text, direct=chosen == "direct")
@@ -564,6 +572,30 @@ class FunctionalPlanner:
         cand.grasp, cand.success, cand.part = done.grasp, done.success, done.part
         cand.validation = done.validation
         cand.times.update(done.times)
+
+
+_GUESSES = {
+    "swept": "sweeping it about a vertical axis",
+    "mirrored": "mirroring it through a symmetry plane",
+    "swept+mirrored": "sweeping it about a vertical axis and mirroring the rest",
+}
+
+
+def view_note(kind: str) -> str:
+    """What a grasp planned on a completed single view rests on (Completion.kind): its
+    verdict is on the guessed hidden side, which on real scans is often wrong in shape
+    (README, "Real scanned meshes")."""
+    if kind == "as seen":
+        return (
+            "planned on a single view that no sweep or mirror plane completes: its hidden back "
+            "is open, the fingers may pass through the real one and the verdict says nothing "
+            "of it; give a complete cloud or a mesh"
+        )
+    return (
+        f"planned on a single view completed by {_GUESSES[kind]}: the verdict is on that "
+        "guess of the hidden side, which on real objects is often wrong in shape; check the "
+        "grasp on the real object"
+    )
 
 
 def least_unsure(candidates: list[CandidateResult], part: str | None) -> CandidateResult | None:

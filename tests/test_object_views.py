@@ -68,6 +68,7 @@ def test_a_completed_view_covers_the_hidden_side_where_the_object_is(category):
     view = single_view_object(obj, seed=3)
     done = complete_view(view)
     assert done.viewpoint is None and len(done.points) > 1.5 * len(view.points)
+    assert done.completed_by in ("swept", "mirrored", "swept+mirrored")
 
     def covered(points: np.ndarray) -> float:
         return float((cKDTree(points).query(obj.points)[0] < 0.005).mean())
@@ -166,6 +167,42 @@ def test_the_planner_plans_on_the_completed_view_unless_told_not_to(complete, mo
     with pytest.raises(RuntimeError, match="stop here"):
         planner.plan(view, "hold the bottle")
     assert (len(seen[0].points) > len(view.points)) == complete
+    assert seen[0].completed_by == ("swept+mirrored" if complete else None)
+
+
+@pytest.mark.usefixtures("needs_open3d")
+def test_a_grasp_on_a_completed_view_says_its_verdict_rests_on_the_guess(monkeypatch):
+    from models.objects import parse_instruction
+    from planner.functional import FunctionalPlanner
+    from planner.results import PlanResult
+
+    planner = FunctionalPlanner("allegro")
+    instruction = parse_instruction("Hold a bottle by body")
+
+    def planned(grasp):
+        def fake(obj, instruction_):
+            return PlanResult(instruction, "allegro", grasp, [], ["another note"])
+
+        return fake
+
+    view = single_view_object(make_object("bottle", 3), seed=3)
+    monkeypatch.setattr(planner, "_plan", planned(object()))
+    notes = planner.plan(view, "hold the bottle").notes
+    assert notes[0] == "another note" and "completed by sweeping it" in notes[1]
+    assert len(planner.plan(make_object("bottle", 3), "hold the bottle").notes) == 1  # a mesh
+    # no grasp returned: nothing to say of one
+    monkeypatch.setattr(planner, "_plan", planned(None))
+    assert planner.plan(view, "hold the bottle").notes == ["another note"]
+    # a view no sweep or plane completes is planned as seen, its back open
+    monkeypatch.setattr("planner.functional.complete_view", _as_seen)
+    monkeypatch.setattr(planner, "_plan", planned(object()))
+    assert "hidden back is open" in planner.plan(view, "hold the bottle").notes[1]
+
+
+def _as_seen(obj):
+    done = load_object(obj.points, normals=obj.normals)
+    done.completed_by = "as seen"
+    return done
 
 
 @pytest.mark.usefixtures("needs_open3d")

@@ -380,8 +380,8 @@ def complete_view(obj: ObjectModel) -> ObjectModel:
     hidden side added (`find_completion`): the points the sweep takes turned about its axis and
     a swept object's underside closed (`base`), the others reflected through the mirror plane
     (points, normals and part labels alike), the copies the depth image contradicts dropped;
-    only smoothed when nothing explains the view. Anything else (a mesh, a cloud without a
-    viewpoint) comes back unchanged."""
+    only smoothed when nothing explains the view; `completed_by` says which. Anything else (a
+    mesh, a cloud without a viewpoint) comes back unchanged."""
     from .loading import load_object
 
     if obj.mesh is not None or obj.viewpoint is None:
@@ -421,10 +421,12 @@ def complete_view(obj: ObjectModel) -> ObjectModel:
             labels = np.concatenate([labels, labels[cKDTree(points).query(disc)[1]]])
         points = np.vstack([points, disc])
         normals = np.vstack([normals, np.tile([0.0, 0.0, -1.0], (len(disc), 1))])
-    return load_object(
+    done = load_object(
         points,
         name=f"{obj.name}_completed",
         normals=normals,
         labels=labels,
         part_names=obj.part_names if labels is not None else (),
     )
+    done.completed_by = plan.kind
+    return done

@@ -50,6 +50,9 @@ class ObjectModel:
     seed: int | None = None
     source: str | None = None  # file path, or None for arrays and generated objects
     viewpoint: np.ndarray | None = None  # camera position of a single-view cloud
+    # a completed single view: how its hidden side was guessed (models.objects.completion.
+    # Completion.kind: "swept", "mirrored", "swept+mirrored" or "as seen"); None otherwise
+    completed_by: str | None = None
     construction_pieces: list[np.ndarray] | None = None  # convex point sets known by construction
     # a loaded mesh's faces in its file: mesh face i is the file's face source_faces[i] (the
     # loader drops degenerate faces), of source_face_count in all
