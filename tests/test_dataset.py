@@ -352,6 +352,7 @@ def _solver(calls: list[str], changed: str | None = None):
     return solve
 
 
+@pytest.mark.slow  # 7 s: a dataset made twice (the default run reached 4m49s)
 def test_refresh_makes_one_category_again_and_keeps_the_others(tmp_path, monkeypatch):
     """After a change to teapots, refresh re-runs only teapot jobs, and the dataset is then what
     generating it from scratch with the changed code gives; a second refresh runs nothing."""

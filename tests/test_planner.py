@@ -47,6 +47,7 @@ def test_moved_grasp_no_longer_holds():
     assert not validate(light, pieces, "allegro", "paper").success
 
 
+@pytest.mark.slow  # 7 s: two full plans (the default run reached 4m49s)
 def test_validate_all_keeps_every_holding_candidate():
     from dataclasses import replace
 
