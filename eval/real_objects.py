@@ -44,7 +44,6 @@ import numpy as np
 from eval.runs import run_resumable
 from models.hands import available_hands, load_hand
 from models.objects import ObjectModel, load_object
-from models.objects.completion import find_completion, smooth
 from models.objects.intents import label_free
 from models.objects.model import OpenMeshWarning
 from models.objects.views import sampled_cloud_object, single_view_object
@@ -247,16 +246,22 @@ def run_task(task: Task) -> Record:
     rec.planned = bool(result.success)
     rec.candidates = len(result.candidates)
     rec.stage_times = {k: round(v, 4) for k, v in result.stage_times().items()}
-    if seen.viewpoint is not None:
-        rec.completion = find_completion(smooth(seen.points), np.asarray(seen.viewpoint)).kind
+    rec.completion = result.completed_by or ""
+    judged: dict[int, bool] = {}  # id(grasp) -> held on the mesh, each grasp validated once
+
+    def on_mesh(grasp) -> bool:
+        if id(grasp) not in judged:
+            judged[id(grasp)] = bool(validate(grasp, pieces, planner.hand, "paper").success)
+        return judged[id(grasp)]
+
     if task.verdicts:
         rec.verdicts = [
-            [bool(c.success), bool(validate(c.grasp, pieces, planner.hand, "paper").success)]
+            [bool(c.success), on_mesh(c.grasp)]
             for c in result.candidates
             if c.grasp is not None and c.validation is not None
         ]
     if result.grasp is not None and result.status != "none":
-        rec.held = bool(validate(result.grasp, pieces, planner.hand, "paper").success)
+        rec.held = on_mesh(result.grasp)
         if rec.held and label_free(result.instruction.intent):
             grasp = result.grasp
             wrist = np.concatenate([grasp.wrist_pos, grasp.wrist_quat])

@@ -99,6 +99,7 @@ class FunctionalPlanner:
         if self.settings.complete_views:
             obj = complete_view(obj)
         result = self._plan(obj, instruction)
+        result.completed_by = obj.completed_by
         if obj.completed_by is not None and result.grasp is not None:
             result.notes.append(view_note(obj.completed_by))
         return result

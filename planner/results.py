@@ -133,6 +133,9 @@ class PlanResult:
     # proposals passed over unsolved in the search for a grasp meeting the intent after one
     # held without it (planner.schedule, planner.intent.proposal_misses): rank -> why
     passed: dict[int, str] = field(default_factory=dict)
+    # planned on a completed single view: how its hidden side was guessed
+    # (ObjectModel.completed_by); None: planned on what was given
+    completed_by: str | None = None
 
     @property
     def best(self) -> CandidateResult | None:
@@ -205,4 +208,5 @@ class PlanResult:
             "chosen_pregrasp_rule": None if best is None else best.grasp.metrics["pregrasp_rule"],
             "times_s": self.stage_times(),
             "notes": self.notes,
+            "completed_by": self.completed_by,
         }

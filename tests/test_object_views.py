@@ -187,7 +187,9 @@ def test_a_grasp_on_a_completed_view_says_its_verdict_rests_on_the_guess(monkeyp
 
     view = single_view_object(make_object("bottle", 3), seed=3)
     monkeypatch.setattr(planner, "_plan", planned(object()))
-    notes = planner.plan(view, "hold the bottle").notes
+    result = planner.plan(view, "hold the bottle")
+    notes = result.notes
+    assert result.completed_by == "swept+mirrored" == result.summary()["completed_by"]
     assert notes[0] == "another note" and "completed by sweeping it" in notes[1]
     assert len(planner.plan(make_object("bottle", 3), "hold the bottle").notes) == 1  # a mesh
     # no grasp returned: nothing to say of one
