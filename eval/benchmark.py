@@ -41,7 +41,8 @@ cloud` does the same with 4096 random surface points (a complete scan, collision
 from the cloud, as for drograsp demo's clouds). Records go to OUT/records.jsonl as they finish,
 so an interrupted run resumes; OUT/summary.json, OUT/table.md and OUT/bars.png are written at
 the end. `--join RUN_A RUN_B` prints the table of two runs' records joined (RUN_B's replacing
-RUN_A's for the same pair, method and seed: a run of some intents over a whole run).
+RUN_A's for the same pair, method and seed: a run of some intents over a whole run); with
+`--out DIR` it writes their table and plot there (a run of some methods beside another's).
 """
 
 from __future__ import annotations
@@ -517,7 +518,12 @@ def main(argv: list[str] | None = None) -> int:
         "e.g. learned.interaction_weights=runs/interaction to try a training run's weights",
     )
     p.add_argument("--workers", type=int, default=1)
-    p.add_argument("--out", default="runs/benchmark", help="records, summary, table, plot")
+    p.add_argument(
+        "--out",
+        default=None,
+        help="records, summary, table, plot (default runs/benchmark); with --join: the joined "
+        "table and plot only",
+    )
     p.add_argument(
         "--join",
         nargs="+",
@@ -538,17 +544,22 @@ def main(argv: list[str] | None = None) -> int:
             for r in read_records(Path(folder) / "records.jsonl", Record)
         }
         rows = summarise(list(joined.values()))
-        print(
-            table(rows, args.candidates)
-            + meetable_line(rows)
-            + intent_line(rows)
-            + uncertain_line(rows)
-        )
+        text = table(rows, args.candidates) + meetable_line(rows) + intent_line(rows)
+        text += uncertain_line(rows)
+        print(text)
+        if args.out:  # the joined runs' table and plot, as one run writes its own
+            out = Path(args.out)
+            out.mkdir(parents=True, exist_ok=True)
+            first = Path(args.join[0]) / "table.md"  # the first run's title: split, view, seeds
+            title = first.read_text().split("\n")[0] if first.is_file() else "joined runs"
+            (out / "table.md").write_text(f"{title}\n\n{text}")
+            bars(rows, out / "bars.png", title)
+            print(f"wrote {out / 'table.md'}, {out / 'bars.png'}")
         return 0
     hands = args.hands or available_hands()
     for h in hands:
         load_hand(h)  # an unknown hand fails here, before any work
-    out = Path(args.out)
+    out = Path(args.out or "runs/benchmark")
     out.mkdir(parents=True, exist_ok=True)
     records_path = out / "records.jsonl"
     overrides = parse_overrides(args.set)

@@ -200,5 +200,9 @@ def test_join_prints_runs_joined_a_later_record_replacing_an_earlier(tmp_path, c
     liftup = run("liftup", rec("Liftup a mug by handle", True))
     assert benchmark.main(["--join", whole, liftup]) == 0
     assert "| learned | leap | 2 | 100% | 100% |" in capsys.readouterr().out
+    assert not (tmp_path / "joined").exists()  # nothing written without --out
+    assert benchmark.main(["--join", whole, liftup, "--out", str(tmp_path / "joined")]) == 0
+    assert "| learned | leap | 2 | 100% | 100% |" in (tmp_path / "joined" / "table.md").read_text()
+    assert (tmp_path / "joined" / "bars.png").stat().st_size > 0
     with pytest.raises(SystemExit, match="no records"):
         benchmark.main(["--join", str(tmp_path / "none")])
