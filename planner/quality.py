@@ -87,7 +87,7 @@ def contact_quality(
     The same contact twice (two hand geometries nearest one vertex of a convex piece: about a
     quarter of the planner's contact sets, often 1e-14 apart) adds only copies of wrenches
     already there, and such near-copies made Qhull stop with a precision error on about 1 in
-    70 solved grasps, which then read as no force closure however good the grasp; they are
+    130 solved grasps, which then read as no force closure however good the grasp; they are
     dropped first (the torque scale still counts every contact, as before), and a set of full
     rank that still meets a precision error is taken again with joggled input (QJ)."""
     points = np.asarray(points, dtype=float).reshape(-1, 3)
