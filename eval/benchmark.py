@@ -456,6 +456,18 @@ def uncertain_line(rows: list[dict]) -> str:
     )
 
 
+def report(rows: list[dict], candidates: int) -> str:
+    """The table and the lines printed below it (meetable, per intent, uncertain)."""
+    return table(rows, candidates) + meetable_line(rows) + intent_line(rows) + uncertain_line(rows)
+
+
+def write_report(out: Path, title: str, text: str, rows: list[dict]) -> None:
+    """OUT/table.md and OUT/bars.png: what a run, or runs joined, leave beside their records."""
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "table.md").write_text(f"{title}\n\n{text}")
+    bars(rows, out / "bars.png", title)
+
+
 def bars(rows: list[dict], path: Path, title: str) -> None:
     import matplotlib
 
@@ -544,16 +556,13 @@ def main(argv: list[str] | None = None) -> int:
             for r in read_records(Path(folder) / "records.jsonl", Record)
         }
         rows = summarise(list(joined.values()))
-        text = table(rows, args.candidates) + meetable_line(rows) + intent_line(rows)
-        text += uncertain_line(rows)
+        text = report(rows, args.candidates)
         print(text)
         if args.out:  # the joined runs' table and plot, as one run writes its own
             out = Path(args.out)
-            out.mkdir(parents=True, exist_ok=True)
             first = Path(args.join[0]) / "table.md"  # the first run's title: split, view, seeds
             title = first.read_text().split("\n")[0] if first.is_file() else "joined runs"
-            (out / "table.md").write_text(f"{title}\n\n{text}")
-            bars(rows, out / "bars.png", title)
+            write_report(out, title, text, rows)
             print(f"wrote {out / 'table.md'}, {out / 'bars.png'}")
         return 0
     hands = args.hands or available_hands()
@@ -591,10 +600,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     records = run_resumable(todo_all, run_task, records_path, Record, args.workers, "benchmark")
     rows = summarise(records)
-    text = table(rows, args.candidates)
-    text += meetable_line(rows)
-    text += intent_line(rows)
-    text += uncertain_line(rows)
+    text = report(rows, args.candidates)
     words = "evaluation-only rewordings" if args.paraphrase else "canonical instructions"
     seen = VIEWS[args.view]
     title = (
@@ -617,8 +623,7 @@ def main(argv: list[str] | None = None) -> int:
         "rows": rows,
     }
     (out / "summary.json").write_text(json.dumps(summary, indent=2))
-    (out / "table.md").write_text(f"{title}\n\n{text}")
-    bars(rows, out / "bars.png", title)
+    write_report(out, title, text, rows)
     print(f"\n{title}\n\n{text}")
     print(f"wrote {out / 'summary.json'}, {out / 'table.md'}, {out / 'bars.png'}")
     return 0
