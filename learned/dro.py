@@ -30,6 +30,7 @@ from torch import nn
 
 from learned import weights as store
 from learned.multilateration import RigidGroups, multilaterate, rigid_fit
+from learned.threads import one_thread
 from models.errors import DrograspError
 
 TEXT_DIM = 384  # learned.text.EMBED_DIM; fixed here so the network imports no text model
@@ -380,6 +381,7 @@ class Prediction:
     total_time: float  # s, hand input + forward + multilateration + Kabsch
 
 
+@one_thread
 @torch.no_grad()
 def predict(
     net: DRONet,

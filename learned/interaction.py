@@ -33,6 +33,7 @@ from torch import nn
 from torch.nn import functional as F
 
 from learned.pointnet import Grouping, LevelConfig, PointNet2Encoder, grouping
+from learned.threads import one_thread
 from learned.weights import WeightsError, load_weights, save_weights, weights_path
 from models.errors import DrograspError, ObjectError
 
@@ -621,6 +622,7 @@ class InteractionModel:
             obj, groups, torch.from_numpy(hxyz).float()[None], hgt, txt, dropped, met=flags
         )
 
+    @one_thread
     @torch.no_grad()
     def sample_prepared(
         self,

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from learned.threads import one_thread
 from models.errors import DrograspError
 from models.hands import HandModel
 
@@ -43,6 +44,7 @@ class JointFit:
     fit_time: float
 
 
+@one_thread
 def fit_configuration(
     hand: HandModel,
     wrist: np.ndarray,

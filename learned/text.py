@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from learned.threads import one_thread
 from models.errors import DrograspError, InstructionError
 
 EMBED_DIM = 384
@@ -95,23 +96,32 @@ def check_text(text: object) -> str:
 
 
 def encode(texts: Sequence[str]) -> np.ndarray:
-    """(n, EMBED_DIM) float32 unit vectors, one per text, in order; repeated texts are cached."""
+    """(n, EMBED_DIM) float32 unit vectors, one per text, in order; repeated texts are cached.
+
+    Each text is encoded alone: in a batch it is padded to the longest text's length, which
+    moves its embedding in the last bits (1e-7), so a sentence's embedding, and the plan made
+    with it, would depend on which other texts were encoded with it (learned.threads)."""
     if isinstance(texts, str):
         texts = [texts]
     clean = [check_text(t) for t in texts]
     missing = sorted({t for t in clean if t not in _cache})
     if missing:
         model = _load()
-        vecs = model.encode(
-            missing, batch_size=64, convert_to_numpy=True, show_progress_bar=False
-        ).astype(np.float32)
-        vecs /= np.maximum(np.linalg.norm(vecs, axis=1, keepdims=True), 1e-12)
-        for t, v in zip(missing, vecs, strict=True):
+        for t in missing:
+            v = _embed(model, t)
             v.setflags(write=False)
             _cache[t] = v
     if not clean:
         return np.zeros((0, EMBED_DIM), dtype=np.float32)
     return np.stack([_cache[t] for t in clean]).astype(np.float32)
+
+
+@one_thread
+def _embed(model: Any, text: str) -> np.ndarray:
+    """One text's unit embedding, on one torch thread (learned.threads)."""
+    vec = model.encode([text], convert_to_numpy=True, show_progress_bar=False)[0]
+    vec = vec.astype(np.float32)
+    return vec / max(float(np.linalg.norm(vec)), 1e-12)
 
 
 def clear_cache() -> None:
