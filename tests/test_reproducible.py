@@ -5,7 +5,10 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+import pytest
+import torch
 
+from models.hands import load_hand
 from models.objects import make_object
 from models.objects.model import Samples
 from models.reproducible import DECIMALS, rounded, rounded_within
@@ -60,3 +63,44 @@ def test_solve_ignores_last_bit_differences_in_its_targets(hand_name):
     )
     a, b = program.solve(exact), program.solve(jittered)
     assert np.array_equal(a.wrist, b.wrist) and np.array_equal(a.q, b.q)
+
+
+@pytest.fixture
+def two_threads():
+    """Torch at two threads for the test (a machine's default is a thread per core)."""
+    before = torch.get_num_threads()
+    torch.set_num_threads(2)
+    yield
+    torch.set_num_threads(before)
+
+
+def test_a_text_s_embedding_is_its_own_whatever_was_encoded_with_it(two_threads):
+    from learned import text
+
+    text.clear_cache()
+    alone = text.encode(["Use a mug by handle"])[0]
+    text.clear_cache()
+    longer = "Would you kindly hoist this mug? Grasp it at the handle, please, thank you."
+    batched = text.encode([longer, "Use a mug by handle"])[1]
+    text.clear_cache()
+    assert np.array_equal(alone, batched)  # batched with padding it moved by 1e-7
+    assert torch.get_num_threads() == 2  # the process's own count is given back
+
+
+def test_the_learned_stages_give_the_same_bits_on_one_thread_and_on_two(hand_name, two_threads):
+    from learned import text
+    from planner.learned_proposer import dro_targets, learned_proposals
+
+    hand = load_hand(hand_name)
+    obj = dataclasses.replace(make_object("mug", 3), face_labels=None, part_names=(), _derived={})
+    sentence = "Use a mug by handle"
+    runs = []
+    for threads in (1, 2):
+        torch.set_num_threads(threads)
+        text.clear_cache()  # each run encodes the sentence on its own thread count
+        drawn = learned_proposals(obj, sentence, hand, 2, seed=0)
+        wrist, anchors = drawn.wrists[0], drawn.anchors[0]
+        targets = dro_targets(obj, sentence, hand, wrist, anchors, (0, 0)).targets
+        runs.append((drawn.wrists, drawn.anchors, targets))
+    for a, b in zip(*runs, strict=True):
+        assert np.array_equal(a, b)
