@@ -281,6 +281,10 @@ class FunctionalPlanner:
         unmet = None
         if meaning is not None and region is None and (known or labels is not None):
             unmet = unmeetable(obj if labels is None else labels.obj, meaning)
+        confirms = None
+        if labels is not None and s.learned.switch_reach > 0:
+            sure = labels.near_seed(s.learned.switch_reach)
+            confirms = partial(touches_part, self.hand, sure, instruction.part)
         result = self._run(
             obj,
             instruction,
@@ -294,6 +298,7 @@ class FunctionalPlanner:
             region,
             None if labels is None else labels.obj,
             unmet,
+            confirms,
         )
         result.understood = understood.to_dict()
         if labels is not None:
@@ -337,6 +342,7 @@ class FunctionalPlanner:
         intent_region: ObjectModel | None = None,
         intent_labels: ObjectModel | None = None,
         unmet: str | None = None,
+        confirms: Callable[[CandidateResult], bool] | None = None,
     ) -> PlanResult:
         """Solve, schedule and validate the proposals (planner.schedule). `programs`: the
         program, and what makes the program for proposals shaped by the intent with the count
@@ -352,7 +358,7 @@ class FunctionalPlanner:
         object's points, labelled by the interaction model: planner.model_labels).
         `unmet`: why no grasp on the part can meet the intent (planner.intent.unmeetable):
         the first grasp that holds on the part is returned, with no search for one meeting
-        it."""
+        it. `confirms`: planner.schedule's (`learned.switch_reach`)."""
         notes = [] if unmet is None else [unmet]
         settings = self.settings
         if unmet is not None:
@@ -444,7 +450,14 @@ class FunctionalPlanner:
 
         wanted = REGION_PART if voter is not None else part
         scheduled = run_schedule(
-            len(proposals), solve, validate, wanted, settings, more if later else None, misses
+            len(proposals),
+            solve,
+            validate,
+            wanted,
+            settings,
+            more if later else None,
+            misses,
+            confirms,
         )
         candidates = scheduled.candidates
         unsure = least_unsure(candidates, wanted)
@@ -580,6 +593,12 @@ _GUESSES = {
     "mirrored": "mirroring it through a symmetry plane",
     "swept+mirrored": "sweeping it about a vertical axis and mirroring the rest",
 }
+
+
+def touches_part(hand: HandModel, obj: ObjectModel, part: str, cand: CandidateResult) -> bool:
+    """Whether the candidate's fingertips vote (planner.labels) for `part` of the labelled
+    object."""
+    return grasp_part(hand, cand.solve.wrist, cand.solve.q, obj) == part
 
 
 def view_note(kind: str) -> str:

@@ -15,7 +15,7 @@ as on any unlabelled cloud.
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy import sparse
@@ -60,6 +60,19 @@ class ModelLabels:
     obj: ObjectModel
     meaning: Definition
     seeds: dict[str, int]
+    held_seed: np.ndarray | None = (
+        None  # (N,) mask: the points the instructed part's samples point at
+    )
+
+    def near_seed(self, reach: float) -> ObjectModel:
+        """The labelled object with the instructed part kept within `reach` (m) of the points
+        its samples point at (`trim_held`): where the model's label of the part is sure."""
+        if self.held_seed is None:
+            return self.obj
+        names = self.obj.part_names
+        held = names.index(self.meaning.part)
+        labels = trim_held(self.obj.points, self.obj.point_labels, self.held_seed, held, reach)
+        return replace(self.obj, cloud_labels=labels, _derived={})
 
 
 def part_texts(instruction: Instruction) -> dict[str, str | None]:
@@ -153,7 +166,7 @@ def labels_from_seeds(
     if not measured <= set(masks):
         return None
     counts = {p: int(masks[p].sum()) if p in masks else 0 for p in names}
-    return ModelLabels(labelled, meaning, counts)
+    return ModelLabels(labelled, meaning, counts, masks[instruction.part])
 
 
 def model_labels(

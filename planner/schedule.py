@@ -56,6 +56,7 @@ def run_schedule(
     settings: PlannerSettings,
     more: Callable[[], int] | None = None,
     misses: Callable[[int], str | None] | None = None,
+    confirms: Callable[[CandidateResult], bool] | None = None,
 ) -> Scheduled:
     """Solve proposals 0..count-1 a batch at a time and validate the solved candidates best
     first, until one holds on `part` and meets its intent, or `max_candidates` are validated
@@ -67,6 +68,9 @@ def run_schedule(
     `misses`: why the proposal of a rank will not meet the intent as drawn, or None
     (planner.intent.proposal_misses); consulted only in the search after a hold that missed
     the intent, where such proposals are passed over unsolved (`Scheduled.passed`).
+    `confirms`: whether a candidate meeting the intent, held after one that missed it, touches
+    the part surely enough to be returned in its place (the learned pipeline's labels:
+    `learned.switch_reach`); one it refuses is passed over as if it had missed the intent.
 
     Candidates whose solved configuration meets the intent (`intent_ok`, planner.intent) are
     validated before the others for the first `intent_first` validations; after them the
@@ -111,7 +115,7 @@ def run_schedule(
             position += 1
             validate(cand)
             if cand.success and cand.part == part:
-                if meets_intent(cand) and found is None:
+                if meets_intent(cand) and found is None and not doubted(cand):
                     found = cand
                     if not s.validate_all:
                         return True
@@ -121,6 +125,10 @@ def run_schedule(
             if cand.success and fallback is None:
                 fallback = cand
         return False
+
+    def doubted(cand: CandidateResult) -> bool:
+        """A candidate meeting the intent after a hold that missed it, that `confirms` refuses."""
+        return off_intent is not None and confirms is not None and not confirms(cand)
 
     def searching() -> int:
         """Proposals still to solve: after a hold that missed the intent, `intent_search`

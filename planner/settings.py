@@ -313,6 +313,13 @@ class LearnedSettings:
     # on the part, within 8 92/93/95% -> 93/91/96%, time per pair within 10%
     label_samples: int = 16
     held_reach: float = 0.03
+    # m; 0: off. With model_labels, once a grasp has held missing the intent, a later one
+    # meeting it is returned in its place only where its fingertips vote (planner.labels) for
+    # the instructed part kept within this distance of the points its samples point at
+    # (ModelLabels.near_seed): the labelled part reaches across its border (a pan's handle
+    # onto the body beside it), where grasps meeting the intent held another part, and a
+    # grasp on the wrong part is worse than one missing the intent (docs/learned_log.md)
+    switch_reach: float = 0.0
     # with model_labels: the samples too are solved with the intent's keep-outs. Off: on the
     # validation pairs it moved first samples by -23 to +16 points per hand and intent for no
     # clear intent gain (docs/learned_log.md)
@@ -328,8 +335,9 @@ class LearnedSettings:
                 'learned.solver="fit" fits the joints to D(R,O)\'s point targets; it needs '
                 "learned.dro=True"
             )
-        if not self.held_reach >= 0:
-            raise PlanningError(f"learned.held_reach must be >= 0 m, got {self.held_reach}")
+        for name in ("held_reach", "switch_reach"):
+            if not getattr(self, name) >= 0:
+                raise PlanningError(f"learned.{name} must be >= 0 m, got {getattr(self, name)}")
         if self.label_samples < 1:
             raise PlanningError(
                 f"learned.label_samples must be at least 1, got {self.label_samples}"

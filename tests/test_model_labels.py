@@ -53,6 +53,17 @@ def test_a_bare_knife_cloud_is_labelled_as_its_parts(hand_name):
     assert found.seeds["blade"] > 0 and found.seeds["handle"] > 0
 
 
+def test_near_its_seed_the_held_part_is_where_the_samples_point():
+    obj, cloud, found, true = _labels("allegro", "knife", "Use a knife by handle")
+    handle = found.obj.part_names.index("handle")
+    sure = found.near_seed(0.01)
+    held, kept = found.obj.point_labels == handle, sure.point_labels == handle
+    assert kept.sum() < held.sum() and not (kept & ~held).any()  # a part of the handle label
+    near = cKDTree(cloud.points[found.held_seed]).query(cloud.points[kept])[0]
+    assert near.max() <= 0.01
+    assert (true[kept] == handle).mean() >= (true[held] == handle).mean()  # surer of its points
+
+
 def test_no_labels_where_a_measured_part_is_named_by_no_instruction():
     """A pen's Use keeps its tip clear, and no instruction asks for the tip: no labels (the
     plan goes on without the Use check) rather than a definition on a part never found."""
@@ -85,6 +96,8 @@ def test_label_samples_must_be_positive():
         LearnedSettings(label_samples=0)
     with pytest.raises(PlanningError, match="held_reach"):
         LearnedSettings(held_reach=float("nan"))
+    with pytest.raises(PlanningError, match="switch_reach"):
+        LearnedSettings(switch_reach=-0.01)
 
 
 def test_other_parts_covered_counts_their_points_near_their_label():

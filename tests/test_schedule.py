@@ -59,23 +59,23 @@ def test_where_none_are_made_the_search_ends_with_the_first():
     assert batches == [[0, 1, 2, 3], [4, 5, 6, 7]] and calls == 1
 
 
-def _search(misses, count: int = 12, **schedule):
-    """Proposal 0 holds without meeting the intent, proposal 9 holds and meets it; the solve
-    batches asked for and what was scheduled."""
+def _search(misses, count: int = 12, confirms=None, **schedule):
+    """Proposal 0 holds without meeting the intent, proposals 9 and 11 hold and meet it; the
+    solve batches asked for and what was scheduled."""
     batches: list[list[int]] = []
 
     def solve(ranks: list[int]) -> list[CandidateResult]:
         batches.append(ranks)
         cands = [_candidate(r) for r in ranks]
         for c in cands:
-            c.intent = IntentCheck("Handover", c.rank == 9, (), "")
+            c.intent = IntentCheck("Handover", c.rank in (9, 11), (), "")
         return cands
 
     def validate(cand: CandidateResult) -> None:
-        cand.success, cand.part = cand.rank in (0, 9), "handle"
+        cand.success, cand.part = cand.rank in (0, 9, 11), "handle"
 
     settings = PlannerSettings(schedule=ScheduleSettings(solve_batch=4, **schedule))
-    scheduled = run_schedule(count, solve, validate, "handle", settings, None, misses)
+    scheduled = run_schedule(count, solve, validate, "handle", settings, None, misses, confirms)
     return batches, scheduled
 
 
@@ -102,3 +102,17 @@ def test_passing_over_every_remaining_proposal_ends_the_search():
     batches, scheduled = _search(lambda rank: "the drawn wrist fails palm_down")
     assert batches == [[0, 1, 2, 3]] and scheduled.found is None
     assert scheduled.on_part.rank == 0 and sorted(scheduled.passed) == list(range(4, 12))
+
+
+def test_a_grasp_meeting_the_intent_replaces_the_one_held_only_where_confirmed():
+    # proposal 9 meets the intent but its part is in doubt (learned.switch_reach): passed over
+    # as if it had missed, and the search goes on to 11
+    batches, scheduled = _search(None, confirms=lambda cand: cand.rank != 9)
+    assert scheduled.found.rank == 11 and scheduled.off_intent.rank == 0
+    # doubted everywhere: the grasp held first, off its intent, is what planning returns
+    batches, scheduled = _search(None, confirms=lambda cand: False)
+    assert scheduled.found is None and scheduled.on_part.rank == 0
+    # asked only after a hold that missed the intent
+    asked: list[int] = []
+    _search(None, count=4, confirms=lambda cand: asked.append(cand.rank) or True)
+    assert asked == []
