@@ -60,15 +60,11 @@ class ModelLabels:
     obj: ObjectModel
     meaning: Definition
     seeds: dict[str, int]
-    held_seed: np.ndarray | None = (
-        None  # (N,) mask: the points the instructed part's samples point at
-    )
+    held_seed: np.ndarray  # (N,) mask: the points the instructed part's samples point at
 
     def near_seed(self, reach: float) -> ObjectModel:
         """The labelled object with the instructed part kept within `reach` (m) of the points
         its samples point at (`trim_held`): where the model's label of the part is sure."""
-        if self.held_seed is None:
-            return self.obj
         names = self.obj.part_names
         held = names.index(self.meaning.part)
         labels = trim_held(self.obj.points, self.obj.point_labels, self.held_seed, held, reach)

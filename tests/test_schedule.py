@@ -112,7 +112,25 @@ def test_a_grasp_meeting_the_intent_replaces_the_one_held_only_where_confirmed()
     # doubted everywhere: the grasp held first, off its intent, is what planning returns
     batches, scheduled = _search(None, confirms=lambda cand: False)
     assert scheduled.found is None and scheduled.on_part.rank == 0
-    # asked only after a hold that missed the intent
+
+
+def test_a_grasp_meeting_the_intent_with_nothing_held_before_is_not_doubted():
+    def solve(ranks: list[int]) -> list[CandidateResult]:
+        cands = [_candidate(r) for r in ranks]
+        for c in cands:
+            c.intent = IntentCheck("Handover", c.rank == 1, (), "")
+        return cands
+
+    def validate(cand: CandidateResult) -> None:
+        cand.success, cand.part = cand.rank == 1, "handle"
+
     asked: list[int] = []
-    _search(None, count=4, confirms=lambda cand: asked.append(cand.rank) or True)
-    assert asked == []
+
+    def confirms(cand: CandidateResult) -> bool:
+        asked.append(cand.rank)
+        return False
+
+    settings = PlannerSettings(schedule=ScheduleSettings(solve_batch=4))
+    scheduled = run_schedule(4, solve, validate, "handle", settings, None, None, confirms)
+    # the first grasp to hold meets the intent: returned, its part never questioned
+    assert scheduled.found.rank == 1 and asked == []
