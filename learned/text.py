@@ -98,30 +98,43 @@ def check_text(text: object) -> str:
 def encode(texts: Sequence[str]) -> np.ndarray:
     """(n, EMBED_DIM) float32 unit vectors, one per text, in order; repeated texts are cached.
 
-    Each text is encoded alone: in a batch it is padded to the longest text's length, which
-    moves its embedding in the last bits (1e-7), so a sentence's embedding, and the plan made
-    with it, would depend on which other texts were encoded with it (learned.threads)."""
+    Texts are encoded in batches of the same token count: a batch of mixed lengths pads each
+    text to the longest, which moves its embedding in the last bits (1e-7), so a sentence's
+    embedding, and the plan made with it, would depend on which other texts were encoded with
+    it. Unpadded, a text's embedding is bit for bit the one it has alone (learned.threads), and
+    the 1568 sentences learned.understand reads its table with take 4-5 s, against 19.5 s one
+    at a time (3.1 s padded, on two threads, before)."""
     if isinstance(texts, str):
         texts = [texts]
     clean = [check_text(t) for t in texts]
     missing = sorted({t for t in clean if t not in _cache})
     if missing:
         model = _load()
-        for t in missing:
-            v = _embed(model, t)
-            v.setflags(write=False)
-            _cache[t] = v
+        for batch in _same_length(model, missing):
+            for t, v in zip(batch, _embed(model, batch), strict=True):
+                v.setflags(write=False)
+                _cache[t] = v
     if not clean:
         return np.zeros((0, EMBED_DIM), dtype=np.float32)
     return np.stack([_cache[t] for t in clean]).astype(np.float32)
 
 
+def _same_length(model: Any, texts: list[str]) -> list[list[str]]:
+    """`texts` grouped by their token count (no padding within a group)."""
+    groups: dict[int, list[str]] = {}
+    for t in texts:
+        groups.setdefault(len(model.tokenizer(t)["input_ids"]), []).append(t)
+    return list(groups.values())
+
+
 @one_thread
-def _embed(model: Any, text: str) -> np.ndarray:
-    """One text's unit embedding, on one torch thread (learned.threads)."""
-    vec = model.encode([text], convert_to_numpy=True, show_progress_bar=False)[0]
-    vec = vec.astype(np.float32)
-    return vec / max(float(np.linalg.norm(vec)), 1e-12)
+def _embed(model: Any, texts: list[str]) -> np.ndarray:
+    """Unit embeddings of texts of one token count, on one torch thread (learned.threads)."""
+    vecs = model.encode(
+        texts, batch_size=len(texts), convert_to_numpy=True, show_progress_bar=False
+    ).astype(np.float32)
+    # row by row: a batch's norms (axis=1) round otherwise than one vector's in the last bit
+    return np.stack([v / max(float(np.linalg.norm(v)), 1e-12) for v in vecs])
 
 
 def clear_cache() -> None:

@@ -84,6 +84,10 @@ def test_a_text_s_embedding_is_its_own_whatever_was_encoded_with_it(two_threads)
     batched = text.encode([longer, "Use a mug by handle"])[1]
     text.clear_cache()
     assert np.array_equal(alone, batched)  # batched with padding it moved by 1e-7
+    text.clear_cache()
+    same_length = text.encode(["Use a cup by body", "Use a mug by handle"])[1]
+    text.clear_cache()
+    assert np.array_equal(alone, same_length)  # in one unpadded batch: the same bits
     assert torch.get_num_threads() == 2  # the process's own count is given back
 
 
